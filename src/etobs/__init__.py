@@ -1,0 +1,1 @@
+"""etobs: decentralized event-triggered state estimation of nonlinear systems."""

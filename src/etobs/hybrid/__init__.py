@@ -1,0 +1,20 @@
+"""Generic batched hybrid-system solvers; nothing here knows about observers or sensors."""
+
+from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.solution import HybridArc, HybridSolution, JumpLog, SavedGrid
+from etobs.hybrid.solver import solve
+from etobs.hybrid.status import Status, status_message
+from etobs.hybrid.system import HybridSystem
+
+__all__ = [
+    "HybridArc",
+    "HybridSolution",
+    "HybridSystem",
+    "JumpLog",
+    "SaveAt",
+    "SavedGrid",
+    "SolverOptions",
+    "Status",
+    "solve",
+    "status_message",
+]

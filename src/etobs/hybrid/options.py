@@ -1,0 +1,92 @@
+"""Solver settings and save options, as frozen validated objects."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.errors import InputError
+
+METHODS = ("dop853", "dopri5")
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Settings of the hybrid solvers (fast and reference).
+
+    Parameters
+    ----------
+    method : {"dop853", "dopri5"}
+        Embedded Runge--Kutta pair of the fast solver: Dormand--Prince 8(5,3) with
+        7th-order dense output (default) or Dormand--Prince 5(4) with 4th-order dense
+        output.
+    rtol, atol : float
+        Relative and absolute local error tolerances.
+    max_step : float
+        Upper bound on the step size (``inf`` for none).
+    first_step : float or None
+        Initial step size; ``None`` selects it automatically per run.
+    max_jumps : int
+        Jump limit per run; a run reaching it stops with status ``max_jumps`` (guards
+        against Zeno behaviour).
+    max_steps : int
+        Step limit per run (accepted and rejected steps).
+    event_samples : int
+        Number of sub-intervals of every step on which the event functions are sampled
+        before root finding. A sign test at step ends alone (``event_samples=1``) misses
+        an event function that rises above zero and falls back inside one step; sampling
+        catches any excursion longer than ``step / event_samples``.
+    event_xtol : float
+        Width in time of the final bracket around each event (the event time accuracy).
+    """
+
+    method: str = "dop853"
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    max_step: float = np.inf
+    first_step: float | None = None
+    max_jumps: int = 1_000_000
+    max_steps: int = 10_000_000
+    event_samples: int = 8
+    event_xtol: float = 1e-12
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise InputError(f"`method` must be one of {METHODS}; got {self.method!r}")
+        v.real("rtol", self.rtol, lower=1e-14, upper=1.0)
+        v.real("atol", self.atol, lower=0.0, lower_open=True)
+        v.real("max_step", self.max_step, lower=0.0, lower_open=True, allow_inf=True)
+        if self.first_step is not None:
+            v.real("first_step", self.first_step, lower=0.0, lower_open=True)
+        v.integer("max_jumps", self.max_jumps, lower=0)
+        v.integer("max_steps", self.max_steps, lower=1)
+        v.integer("event_samples", self.event_samples, lower=1)
+        v.real("event_xtol", self.event_xtol, lower=0.0, lower_open=True)
+
+
+@dataclass(frozen=True)
+class SaveAt:
+    """What a solve keeps of each run.
+
+    Parameters
+    ----------
+    steps : bool
+        Keep the state at every step end and on both sides of every jump (the full
+        hybrid arc). Memory grows with the number of steps; turn off for big batches.
+    grid : array_like or None
+        Increasing times at which to keep the state (from the dense output). At a jump
+        time the value before the jump (smallest ``j``) is kept.
+    """
+
+    steps: bool = True
+    grid: Any = field(default=None)
+
+    def __post_init__(self) -> None:
+        if self.grid is not None:
+            g = v.vector("grid", self.grid)
+            if g.size and np.any(np.diff(g) <= 0):
+                raise InputError("`grid` must be strictly increasing")
+            object.__setattr__(self, "grid", g)

@@ -1,0 +1,369 @@
+"""The fast hybrid solver: a batch of runs advanced together, one step size per run.
+
+Solver contract (what :func:`solve` guarantees for every run of the batch):
+
+1. Along flows the state follows ``flow`` with an embedded Runge--Kutta pair
+   (``SolverOptions.method``) under local error control (``rtol``, ``atol``).
+2. Every event function is evaluated at the start, at ``event_samples - 1`` interior
+   points and at the end of every accepted step (first on a cheap cubic Hermite
+   interpolant, then, where it signals a crossing, on the method's own dense output),
+   so an excursion above zero longer than ``step / event_samples`` is never missed.
+3. The first crossing is located by bracketing root finding on the dense output to a
+   bracket of width ``event_xtol`` in time; the event time reported is the right end,
+   where the event function is ``>= 0``, and the state there comes from the dense output.
+4. At an event every rule with ``g_k >= 0`` jumps once, in rule order, each with its own
+   ``j``; the event functions are then evaluated again and the jumps repeat until all
+   are negative (bounded by ``max_jumps``).
+5. A run ends with status ``completed`` at ``t_end`` or with a failure status of its own
+   (``max_jumps``, ``max_steps``, ``nonfinite``, ``step_underflow``); other runs go on.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.errors import InputError, ModelError
+from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.recorder import Recorder
+from etobs.hybrid.rootfind import bracket_root
+from etobs.hybrid.solution import HybridSolution
+from etobs.hybrid.status import Status
+from etobs.hybrid.system import HybridSystem
+from etobs.hybrid.tableau import TABLEAUS, hermite
+
+# Step-size controller constants, as in Hairer, Nørsett & Wanner (1993), II.4.
+SAFETY = 0.9  # keep the next error estimate below the tolerance with margin
+MIN_FACTOR = 0.2  # never shrink a step by more than 5x at once
+MAX_FACTOR = 10.0  # never grow a step by more than 10x at once
+
+
+def check_span(t_span: Any) -> tuple[float, float]:
+    """Validate ``t_span = (t0, t_end)`` with ``t0 <= t_end``."""
+    try:
+        t0, t_end = t_span
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"`t_span` must be a pair (t0, t_end); got {t_span!r}") from exc
+    t0 = v.real("t_span[0]", t0)
+    t_end = v.real("t_span[1]", t_end)
+    if t_end < t0:
+        raise InputError(f"`t_span` must satisfy t0 <= t_end; got ({t0:g}, {t_end:g})")
+    return t0, t_end
+
+
+def solve(
+    system: HybridSystem,
+    x0: Any,
+    t_span: Any,
+    *,
+    options: SolverOptions | None = None,
+    save: SaveAt | None = None,
+) -> HybridSolution:
+    """Solve a batch of runs of a hybrid system with the fast solver.
+
+    Parameters
+    ----------
+    system : HybridSystem
+    x0 : array_like, shape (n,) or (B, n)
+        Initial state of each run.
+    t_span : (float, float)
+        Start and end time, common to all runs.
+    options : SolverOptions, optional
+    save : SaveAt, optional
+        What to keep (default: the full hybrid arcs).
+
+    Returns
+    -------
+    HybridSolution
+
+    Examples
+    --------
+    A bouncing ball, ``x = (height, velocity)``, restitution 0.5:
+
+    >>> import numpy as np
+    >>> from etobs.hybrid import HybridSystem, solve
+    >>> ball = HybridSystem(
+    ...     n=2, n_rules=1,
+    ...     flow=lambda t, x: np.stack([x[:, 1], -9.81 + 0 * x[:, 0]], axis=1),
+    ...     guard=lambda t, x: np.where(x[:, 1] < 0, -x[:, 0], -1.0)[:, None],
+    ...     jump=lambda k, t, x: np.stack([0 * x[:, 0], -0.5 * x[:, 1]], axis=1),
+    ... )
+    >>> sol = solve(ball, [1.0, 0.0], (0.0, 1.0))
+    >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
+    0.451524
+    """
+    if not isinstance(system, HybridSystem):
+        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
+    t0, t_end = check_span(t_span)
+    x = v.batch("x0", x0, system.n)
+    return _FastSolver(system, x, t0, t_end, options or SolverOptions(), save or SaveAt()).run()
+
+
+def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(out, dtype=float)
+    if arr.shape != shape:
+        raise ModelError(f"`{name}` returned an array of shape {arr.shape}; expected {shape}")
+    return arr
+
+
+class _FastSolver:
+    def __init__(
+        self, system: HybridSystem, x0: np.ndarray, t0: float, t_end: float,
+        opts: SolverOptions, save: SaveAt,
+    ) -> None:
+        self.sys, self.opts, self.t0, self.t_end = system, opts, t0, t_end
+        self.tab = TABLEAUS[opts.method]
+        self.err_exp = -1.0 / (self.tab.error_order + 1)
+        b, n = x0.shape
+        self.B, self.n, self.m = b, n, system.n_rules
+        self.t = np.full(b, t0)
+        self.x = x0.copy()
+        self.j = np.zeros(b, dtype=np.int64)
+        self.status = np.full(b, Status.RUNNING, dtype=np.int64)
+        self.n_steps = np.zeros(b, dtype=np.int64)
+        self.n_rejected = np.zeros(b, dtype=np.int64)
+        self.g = np.empty((b, self.m))
+        self.f = np.zeros((b, n))
+        self.h = np.zeros(b)
+        self.rec = Recorder(b, n, save, t0)
+
+    # -- user functions with shape checks ---------------------------------------------
+    def flow(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return _checked("flow", self.sys.flow(t, x), x.shape)
+
+    def guard(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return _checked("guard", self.sys.guard(t, x), (x.shape[0], self.m))
+
+    # -- driver -----------------------------------------------------------------------
+    def run(self) -> HybridSolution:
+        runs = np.arange(self.B)
+        self.rec.steps(runs, self.t, self.j, self.x)
+        row, g = self.rec.grid_due(runs, self.t)
+        self.rec.grid_fill(runs[row], g, self.j[row], self.x[row])
+        self._jump_until_flow(runs)
+        live = runs[self.status == Status.RUNNING]
+        self._refresh_flow(live)
+        live = live[self.status[live] == Status.RUNNING]
+        if live.size:
+            if self.opts.first_step is not None:
+                self.h[live] = self.opts.first_step
+            else:
+                self.h[live] = self._initial_step(live)
+        while True:
+            act = np.flatnonzero(self.status == Status.RUNNING)
+            if act.size == 0:
+                break
+            self._advance(act)
+        return HybridSolution(
+            t_span=(self.t0, self.t_end), status=self.status.copy(), t_final=self.t.copy(),
+            j_final=self.j.copy(), x_final=self.x.copy(), jumps=self.rec.jump_log(),
+            arcs=self.rec.arcs(), grid=self.rec.saved_grid(), n_steps=self.n_steps,
+            n_rejected=self.n_rejected, rule_names=self.sys.rule_names, backend="fast",
+        )
+
+    def _refresh_flow(self, runs: np.ndarray) -> None:
+        """Recompute ``f`` after a jump; mark runs whose derivative is not finite."""
+        if runs.size == 0:
+            return
+        f = self.flow(self.t[runs], self.x[runs])
+        bad = ~np.all(np.isfinite(f), axis=1)
+        self.status[runs[bad]] = Status.NONFINITE
+        self.f[runs] = f
+        done = runs[~bad & (self.t[runs] >= self.t_end)]
+        self.status[done] = Status.COMPLETED
+
+    def _initial_step(self, runs: np.ndarray) -> np.ndarray:
+        """Hairer, Nørsett & Wanner (1993), II.4: a first step from two flow evaluations."""
+        o = self.opts
+        t, x, f = self.t[runs], self.x[runs], self.f[runs]
+        remaining = self.t_end - t
+        scale = o.atol + o.rtol * np.abs(x)
+        d0 = np.sqrt(np.mean((x / scale) ** 2, axis=1))
+        d1 = np.sqrt(np.mean((f / scale) ** 2, axis=1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h0 = np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / d1)
+        h0 = np.minimum(h0, np.maximum(remaining, 1e-12))
+        f1 = self.flow(t + h0, x + h0[:, None] * f)
+        d2 = np.sqrt(np.mean(((f1 - f) / scale) ** 2, axis=1)) / h0
+        big = np.maximum(d1, d2)
+        with np.errstate(divide="ignore"):
+            h1 = np.where(
+                big <= 1e-15,
+                np.maximum(1e-6, h0 * 1e-3),
+                (0.01 / big) ** (1.0 / (self.tab.error_order + 1)),
+            )
+        return np.minimum(np.minimum(100 * h0, h1), o.max_step)
+
+    # -- jumps ------------------------------------------------------------------------
+    def _jump_until_flow(self, runs: np.ndarray) -> None:
+        """Apply jumps to ``runs`` until every event function is negative."""
+        runs = runs[self.status[runs] == Status.RUNNING]
+        while runs.size:
+            g = self.guard(self.t[runs], self.x[runs])
+            self.g[runs] = g
+            fire = g >= 0
+            has = fire.any(axis=1)
+            runs, fire = runs[has], fire[has]
+            for k in range(self.m):
+                rk = runs[fire[:, k]]
+                rk = rk[self.status[rk] == Status.RUNNING]
+                if rk.size == 0:
+                    continue
+                over = self.j[rk] >= self.opts.max_jumps
+                self.status[rk[over]] = Status.MAX_JUMPS
+                rk = rk[~over]
+                if rk.size == 0:
+                    continue
+                xn = _checked("jump", self.sys.jump(k, self.t[rk], self.x[rk]), (rk.size, self.n))
+                self.rec.jumps(rk, k, self.t[rk], self.j[rk])
+                self.j[rk] += 1
+                self.x[rk] = xn
+                self.rec.steps(rk, self.t[rk], self.j[rk], xn)
+                bad = ~np.all(np.isfinite(xn), axis=1)
+                self.status[rk[bad]] = Status.NONFINITE
+            runs = runs[self.status[runs] == Status.RUNNING]
+
+    # -- one step of every active run -------------------------------------------------
+    def _advance(self, act: np.ndarray) -> None:
+        o, tab = self.opts, self.tab
+        t, x, f = self.t[act], self.x[act], self.f[act]
+        remaining = self.t_end - t
+        h = np.minimum(np.minimum(self.h[act], o.max_step), remaining)
+        last = h >= remaining
+        K, x_new = tab.step(self.flow, t, x, f, h)
+        err = tab.error_norm(K, h, x, x_new, o.rtol, o.atol)
+        finite = np.isfinite(err) & np.all(np.isfinite(x_new), axis=1)
+        finite &= np.all(np.isfinite(K[-1]), axis=1)
+        accept = finite & (err <= 1.0)
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            factor = np.clip(SAFETY * err**self.err_exp, MIN_FACTOR, MAX_FACTOR)
+        factor = np.where(err == 0.0, MAX_FACTOR, factor)
+        factor = np.where(finite, factor, MIN_FACTOR)
+        factor = np.where(accept, factor, np.minimum(factor, 1.0))
+        h_next = h * factor
+        self.n_steps[act[accept]] += 1
+        self.n_rejected[act[~accept]] += 1
+        # A rejected step that can no longer shrink ends its run.
+        tiny = ~accept & (h_next <= 4.0 * np.spacing(np.maximum(np.abs(t), 1.0)))
+        self.status[act[tiny & finite]] = Status.STEP_UNDERFLOW
+        self.status[act[tiny & ~finite]] = Status.NONFINITE
+        self.h[act] = np.where(last & accept, np.maximum(self.h[act], h_next), h_next)
+        too_many = (self.n_steps[act] + self.n_rejected[act]) >= o.max_steps
+        ia = np.flatnonzero(accept)
+        if ia.size:
+            self._accept(act[ia], t[ia], x[ia], f[ia], h[ia], last[ia], K[:, ia], x_new[ia])
+        still = act[too_many]
+        self.status[still[self.status[still] == Status.RUNNING]] = Status.MAX_STEPS
+
+    def _accept(
+        self, runs: np.ndarray, t0: np.ndarray, x0: np.ndarray, f0: np.ndarray, h: np.ndarray,
+        last: np.ndarray, K: np.ndarray, x1: np.ndarray,
+    ) -> None:
+        tab, o, m, n = self.tab, self.opts, self.m, self.n
+        M = runs.size
+        f1 = K[-1]
+        t1 = np.where(last, self.t_end, t0 + h)
+        g0 = self.g[runs]
+        g1 = self.guard(t1, x1)
+        S = o.event_samples
+        theta = np.arange(1, S) / S
+        if m and S > 1:
+            xs = hermite(x0, f0, x1, f1, h, theta)
+            ts = t0[:, None] + h[:, None] * theta[None, :]
+            gs = self.guard(ts.ravel(), xs.reshape(-1, n)).reshape(M, S - 1, m)
+            hit = np.concatenate([(gs >= 0).any(axis=2), (g1 >= 0).any(axis=1)[:, None]], axis=1)
+        else:
+            hit = (g1 >= 0).any(axis=1)[:, None]
+        cand = np.flatnonzero(hit.any(axis=1))
+
+        # Runs with grid points in the step need the dense output too.
+        g_start = self.rec.grid_next[runs] if self.rec.grid_t is not None else None
+        need = np.zeros(M, dtype=bool)
+        need[cand] = True
+        if g_start is not None:
+            stop = np.searchsorted(self.rec.grid_t, t1, "right")
+            need |= stop > g_start
+        dense_rows = np.flatnonzero(need)
+        pos = np.full(M, -1)
+        pos[dense_rows] = np.arange(dense_rows.size)
+        Q = None
+        if dense_rows.size:
+            Q = tab.dense(self.flow, t0[dense_rows], x0[dense_rows], x1[dense_rows],
+                          K[:, dense_rows], h[dense_rows])
+
+        def at(rows: np.ndarray, th: np.ndarray) -> np.ndarray:
+            """Dense-output state of step rows ``rows`` at ``θ = th``."""
+            assert Q is not None
+            p = pos[rows]
+            return tab.evaluate(Q[:, p], x0[rows], th)
+
+        theta_ev = np.full(M, np.nan)
+        if cand.size:
+            theta_ev[cand] = self._locate(cand, at, t0, h, g0, g1, theta)
+        ev = np.flatnonzero(np.isfinite(theta_ev))
+        t_stop = t1.copy()
+        x_stop = x1.copy()
+        if ev.size:
+            inner = ev[theta_ev[ev] < 1.0]
+            t_stop[inner] = t0[inner] + theta_ev[inner] * h[inner]
+            x_stop[inner] = at(inner, theta_ev[inner])
+
+        # Grid values up to the stop time, before any jump there.
+        row, gidx = self.rec.grid_due(runs, t_stop)
+        if row.size:
+            th = np.clip((self.rec.grid_t[gidx] - t0[row]) / h[row], 0.0, 1.0)
+            self.rec.grid_fill(runs[row], gidx, self.j[runs[row]], at(row, th))
+
+        self.t[runs] = t_stop
+        self.x[runs] = x_stop
+        self.rec.steps(runs, t_stop, self.j[runs], x_stop)
+        flowing = np.ones(M, dtype=bool)
+        flowing[ev] = False
+        fr = runs[flowing]
+        self.f[fr] = f1[flowing]
+        self.g[fr] = g1[flowing]
+        self.status[fr[last[flowing]]] = Status.COMPLETED
+        if ev.size:
+            er = runs[ev]
+            self._jump_until_flow(er)
+            self._refresh_flow(er[self.status[er] == Status.RUNNING])
+
+    def _locate(self, cand, at, t0, h, g0, g1, theta) -> np.ndarray:
+        """θ of the first event in each candidate step (NaN where there is none)."""
+        S, m, n = self.opts.event_samples, self.m, self.n
+        C = cand.size
+        if S > 1:
+            rows = np.repeat(cand, S - 1)
+            ths = np.tile(theta, C)
+            xs = at(rows, ths)
+            gs = self.guard(t0[rows] + ths * h[rows], xs).reshape(C, S - 1, m)
+            gall = np.concatenate([gs, g1[cand][:, None, :]], axis=1)
+        else:
+            gall = g1[cand][:, None, :]
+        hit = (gall >= 0).any(axis=2)
+        has = hit.any(axis=1)
+        out = np.full(C, np.nan)
+        if not has.any():
+            return out
+        c_idx = np.flatnonzero(has)
+        k = hit[c_idx].argmax(axis=1)
+        g_left = np.where((k == 0)[:, None], g0[cand[c_idx]], gall[c_idx, np.maximum(k - 1, 0)])
+        g_right = gall[c_idx, k]
+        cross = (g_left < 0) & (g_right >= 0)
+        pr, rule = np.nonzero(cross)
+        rows = cand[c_idx[pr]]
+        lo = k[pr] / S
+        hi = (k[pr] + 1) / S
+
+        def fun(sel: np.ndarray, th: np.ndarray) -> np.ndarray:
+            r = rows[sel]
+            return self.guard(t0[r] + th * h[r], at(r, th))[np.arange(sel.size), rule[sel]]
+
+        _, hi = bracket_root(fun, lo, hi, g_left[pr, rule], g_right[pr, rule],
+                             self.opts.event_xtol / h[rows])
+        best = np.full(C, np.inf)
+        np.minimum.at(best, c_idx[pr], hi)
+        out[c_idx] = best[c_idx]
+        return out

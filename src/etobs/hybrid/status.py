@@ -1,0 +1,61 @@
+"""Per-run termination status of a hybrid simulation.
+
+Status is data: each run of a batch carries its own status, and one run's failure
+never stops the others. :func:`status_message` explains each status and how to fix it.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class Status(enum.IntEnum):
+    """How a run ended."""
+
+    RUNNING = -1
+    COMPLETED = 0
+    MAX_JUMPS = 1
+    MAX_STEPS = 2
+    NONFINITE = 3
+    STEP_UNDERFLOW = 4
+
+    @property
+    def label(self) -> str:
+        """Lower-case name used in files and tables, e.g. ``"max_jumps"``."""
+        return self.name.lower()
+
+    @property
+    def ok(self) -> bool:
+        """Whether the run reached the end of the horizon."""
+        return self is Status.COMPLETED
+
+
+_MESSAGES = {
+    Status.RUNNING: "the run has not finished",
+    Status.COMPLETED: "the run reached the end of the horizon",
+    Status.MAX_JUMPS: (
+        "the run reached the jump limit before the end of the horizon. This may be Zeno "
+        "behaviour (check that every eps > 0) or simply many transmissions: increase "
+        "`SolverOptions(max_jumps=...)`"
+    ),
+    Status.MAX_STEPS: (
+        "the run reached the step limit before the end of the horizon: loosen `rtol`/`atol`, "
+        "or increase `SolverOptions(max_steps=...)`"
+    ),
+    Status.NONFINITE: (
+        "the state or its derivative became NaN or infinite (finite escape time, or a model "
+        "function returning NaN): check the model and the initial condition"
+    ),
+    Status.STEP_UNDERFLOW: (
+        "the step size fell below the floating-point resolution of t: the problem may be "
+        "stiff or discontinuous along flows; loosen `rtol`/`atol` or check the model"
+    ),
+}
+
+
+def status_message(status: Status, t: float | None = None) -> str:
+    """Return a sentence describing ``status`` (with the stopping time when given)."""
+    text = _MESSAGES[Status(status)]
+    if t is not None and status != Status.COMPLETED:
+        return f"stopped at t={t:.6g}: {text}"
+    return text

@@ -1,0 +1,63 @@
+"""A hybrid system in the form the solvers accept.
+
+The system is ``x' = flow(t, x)`` while every event function is negative, and
+``x+ = jump(k, t, x)`` when event function ``k`` is ``>= 0``. The solvers know nothing
+else about it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from etobs import _validate as v
+
+FlowFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+GuardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+JumpFn = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class HybridSystem:
+    """A batched hybrid system with ``n_rules`` jump rules.
+
+    Parameters
+    ----------
+    n : int
+        State dimension.
+    n_rules : int
+        Number of jump rules (event functions).
+    flow : callable
+        ``flow(t, x) -> dx``; ``t`` has shape ``(B,)``, ``x`` and ``dx`` shape ``(B, n)``.
+    guard : callable
+        ``guard(t, x) -> g`` of shape ``(B, n_rules)``; rule ``k`` may jump where
+        ``g[:, k] >= 0`` and the system flows while every ``g < 0``.
+    jump : callable
+        ``jump(k, t, x) -> x+`` applies rule ``k`` to the rows given, shape ``(M, n)``.
+    rule_names : tuple of str, optional
+        Names of the rules, used in messages and logs.
+    """
+
+    n: int
+    n_rules: int
+    flow: FlowFn
+    guard: GuardFn
+    jump: JumpFn
+    rule_names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        v.integer("n", self.n, lower=1)
+        v.integer("n_rules", self.n_rules, lower=0)
+        v.function("flow", self.flow)
+        v.function("guard", self.guard)
+        v.function("jump", self.jump)
+        if not self.rule_names:
+            object.__setattr__(self, "rule_names", tuple(f"rule{k}" for k in range(self.n_rules)))
+        elif len(self.rule_names) != self.n_rules:
+            from etobs.errors import InputError
+
+            raise InputError(
+                f"`rule_names` has {len(self.rule_names)} names; expected n_rules={self.n_rules}"
+            )
