@@ -1,6 +1,7 @@
 """Generic batched hybrid-system solvers; nothing here knows about observers or sensors."""
 
 from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solution import HybridArc, HybridSolution, JumpLog, SavedGrid
 from etobs.hybrid.solver import solve
 from etobs.hybrid.status import Status, status_message
@@ -16,5 +17,6 @@ __all__ = [
     "SolverOptions",
     "Status",
     "solve",
+    "solve_reference",
     "status_message",
 ]

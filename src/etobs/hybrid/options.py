@@ -41,6 +41,7 @@ class SolverOptions:
         catches any excursion longer than ``step / event_samples``.
     event_xtol : float
         Width in time of the final bracket around each event (the event time accuracy).
+
     """
 
     method: str = "dop853"
@@ -79,6 +80,7 @@ class SaveAt:
     grid : array_like or None
         Increasing times at which to keep the state (from the dense output). At a jump
         time the value before the jump (smallest ``j``) is kept.
+
     """
 
     steps: bool = True

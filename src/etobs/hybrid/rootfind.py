@@ -37,6 +37,7 @@ def bracket_root(
     -------
     lo, hi : ndarray, shape (M,)
         Final brackets; ``fun(hi) >= 0`` and ``fun(lo) < 0`` still hold.
+
     """
     lo, hi = lo.astype(float).copy(), hi.astype(float).copy()
     f_lo, f_hi = f_lo.astype(float).copy(), f_hi.astype(float).copy()

@@ -21,6 +21,7 @@ class HybridArc:
     t : ndarray, shape (K,)
     j : ndarray of int, shape (K,)
     x : ndarray, shape (K, n)
+
     """
 
     t: np.ndarray
@@ -97,6 +98,7 @@ class HybridSolution:
         Accepted and rejected steps of each run.
     rule_names : tuple of str
     backend : str
+
     """
 
     t_span: tuple[float, float]

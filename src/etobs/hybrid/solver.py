@@ -93,6 +93,7 @@ def solve(
     >>> sol = solve(ball, [1.0, 0.0], (0.0, 1.0))
     >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
     0.451524
+
     """
     if not isinstance(system, HybridSystem):
         raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
@@ -268,15 +269,21 @@ class _FastSolver:
         g0 = self.g[runs]
         g1 = self.guard(t1, x1)
         S = o.event_samples
-        theta = np.arange(1, S) / S
+        hit = (g1 >= 0).any(axis=1)
         if m and S > 1:
-            xs = hermite(x0, f0, x1, f1, h, theta)
-            ts = t0[:, None] + h[:, None] * theta[None, :]
+            # First look on the cubic Hermite interpolant (no extra flow evaluations).
+            # Its error can hide a short excursion near a smooth maximum, so a step whose
+            # samples or predicted peak come within a quarter of the step's range of
+            # zero is screened again on the accurate dense output (``_locate``).
+            th = np.arange(1, S) / S
+            xs = hermite(x0, f0, x1, f1, h, th)
+            ts = t0[:, None] + h[:, None] * th[None, :]
             gs = self.guard(ts.ravel(), xs.reshape(-1, n)).reshape(M, S - 1, m)
-            hit = np.concatenate([(gs >= 0).any(axis=2), (g1 >= 0).any(axis=1)[:, None]], axis=1)
-        else:
-            hit = (g1 >= 0).any(axis=1)[:, None]
-        cand = np.flatnonzero(hit.any(axis=1))
+            seq = np.concatenate([g0[:, None], gs, g1[:, None]], axis=1)
+            top = np.maximum(seq.max(axis=1), _peak_value(seq))
+            margin = 0.25 * (seq.max(axis=1) - seq.min(axis=1))
+            hit |= (top >= -margin).any(axis=1)
+        cand = np.flatnonzero(hit)
 
         # Runs with grid points in the step need the dense output too.
         g_start = self.rec.grid_next[runs] if self.rec.grid_t is not None else None
@@ -301,7 +308,7 @@ class _FastSolver:
 
         theta_ev = np.full(M, np.nan)
         if cand.size:
-            theta_ev[cand] = self._locate(cand, at, t0, h, g0, g1, theta)
+            theta_ev[cand] = self._locate(cand, at, t0, h, g0, g1)
         ev = np.flatnonzero(np.isfinite(theta_ev))
         t_stop = t1.copy()
         x_stop = x1.copy()
@@ -330,18 +337,32 @@ class _FastSolver:
             self._jump_until_flow(er)
             self._refresh_flow(er[self.status[er] == Status.RUNNING])
 
-    def _locate(self, cand, at, t0, h, g0, g1, theta) -> np.ndarray:
-        """θ of the first event in each candidate step (NaN where there is none)."""
-        S, m, n = self.opts.event_samples, self.m, self.n
+    def _locate(self, cand, at, t0, h, g0, g1) -> np.ndarray:
+        """θ of the first event in each candidate step (NaN where there is none).
+
+        The event functions are sampled on the dense output at ``event_samples - 1``
+        uniform interior points, the step end and one peak probe (:func:`_peak_probe`);
+        the first sign change is then bracketed and refined.
+        """
+        m, S = self.m, self.opts.event_samples
         C = cand.size
+        thetas = np.ones((C, S + 1))
+        gall = np.broadcast_to(g1[cand][:, None, :], (C, S + 1, m)).copy()
         if S > 1:
+            thetas[:, : S - 1] = np.arange(1, S) / S
             rows = np.repeat(cand, S - 1)
-            ths = np.tile(theta, C)
-            xs = at(rows, ths)
-            gs = self.guard(t0[rows] + ths * h[rows], xs).reshape(C, S - 1, m)
-            gall = np.concatenate([gs, g1[cand][:, None, :]], axis=1)
-        else:
-            gall = g1[cand][:, None, :]
+            ths = thetas[:, : S - 1].ravel()
+            gs = self.guard(t0[rows] + ths * h[rows], at(rows, ths)).reshape(C, S - 1, m)
+            gall[:, : S - 1] = gs
+            probe = _peak_probe(np.concatenate([g0[cand][:, None], gs, g1[cand][:, None]], axis=1))
+            pr = np.flatnonzero(np.isfinite(probe))
+            if pr.size:
+                r = cand[pr]
+                thetas[pr, S] = probe[pr]
+                gall[pr, S] = self.guard(t0[r] + probe[pr] * h[r], at(r, probe[pr]))
+            order = np.argsort(thetas, axis=1, kind="stable")
+            thetas = np.take_along_axis(thetas, order, axis=1)
+            gall = np.take_along_axis(gall, order[:, :, None], axis=1)
         hit = (gall >= 0).any(axis=2)
         has = hit.any(axis=1)
         out = np.full(C, np.nan)
@@ -351,19 +372,56 @@ class _FastSolver:
         k = hit[c_idx].argmax(axis=1)
         g_left = np.where((k == 0)[:, None], g0[cand[c_idx]], gall[c_idx, np.maximum(k - 1, 0)])
         g_right = gall[c_idx, k]
+        lo_all = np.where(k == 0, 0.0, thetas[c_idx, np.maximum(k - 1, 0)])
+        hi_all = thetas[c_idx, k]
         cross = (g_left < 0) & (g_right >= 0)
         pr, rule = np.nonzero(cross)
         rows = cand[c_idx[pr]]
-        lo = k[pr] / S
-        hi = (k[pr] + 1) / S
 
         def fun(sel: np.ndarray, th: np.ndarray) -> np.ndarray:
             r = rows[sel]
             return self.guard(t0[r] + th * h[r], at(r, th))[np.arange(sel.size), rule[sel]]
 
-        _, hi = bracket_root(fun, lo, hi, g_left[pr, rule], g_right[pr, rule],
+        _, hi = bracket_root(fun, lo_all[pr], hi_all[pr], g_left[pr, rule], g_right[pr, rule],
                              self.opts.event_xtol / h[rows])
         best = np.full(C, np.inf)
         np.minimum.at(best, c_idx[pr], hi)
         out[c_idx] = best[c_idx]
         return out
+
+
+def _parabola_peaks(seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Peaks of the parabolas through each negative interior local maximum of ``seq``.
+
+    ``seq`` (M, S + 1, m) holds event-function values at ``θ = 0, 1/S, ..., 1``. Returns
+    the predicted peak values and their θ, shape (M, S - 1, m); ``-inf`` and NaN where
+    the sample is not such a maximum.
+    """
+    S = seq.shape[1] - 1
+    left, mid, right = seq[:, :-2], seq[:, 1:-1], seq[:, 2:]
+    curv = left - 2.0 * mid + right
+    is_max = (mid > left) & (mid >= right) & (mid < 0) & (curv < 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        peak = mid - (right - left) ** 2 / (8.0 * curv)
+        theta = (np.arange(1, S)[None, :, None] + (left - right) / (2.0 * curv)) / S
+    return np.where(is_max, peak, -np.inf), np.where(is_max, theta, np.nan)
+
+
+def _peak_value(seq: np.ndarray) -> np.ndarray:
+    """Largest predicted parabola peak per row and rule, shape (M, m)."""
+    peak, _ = _parabola_peaks(seq)
+    return peak.max(axis=1) if peak.shape[1] else np.full((seq.shape[0], seq.shape[2]), -np.inf)
+
+
+def _peak_probe(seq: np.ndarray) -> np.ndarray:
+    """Earliest θ per row where a parabola predicts the event function reaches zero.
+
+    At every interior local maximum that is still negative, the parabola through it and
+    its two neighbours predicts the peak; this catches a short excursion above zero
+    between two samples near a smooth maximum, the typical way a sampled test misses.
+    Returns NaN for rows with no such prediction.
+    """
+    peak, theta = _parabola_peaks(seq)
+    theta = np.where(peak >= 0, theta, np.inf)
+    best = theta.min(axis=(1, 2)) if theta.shape[1] else np.full(seq.shape[0], np.inf)
+    return np.where(np.isfinite(best), best, np.nan)

@@ -38,6 +38,7 @@ class HybridSystem:
         ``jump(k, t, x) -> x+`` applies rule ``k`` to the rows given, shape ``(M, n)``.
     rule_names : tuple of str, optional
         Names of the rules, used in messages and logs.
+
     """
 
     n: int

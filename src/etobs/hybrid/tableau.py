@@ -53,6 +53,7 @@ class Tableau:
         K : ndarray, shape (stages + 1, M, n)
             Stage derivatives; the last one is ``flow(t + h, y_new)``.
         y_new : ndarray, shape (M, n)
+
         """
         s = self.stages
         K = np.empty((s + 1, *y.shape))
@@ -132,15 +133,15 @@ def hermite(y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, h: n
             theta: np.ndarray) -> np.ndarray:
     """Cubic Hermite interpolant on each step, a cheap first look between step ends.
 
-    ``y0, f0, y1, f1`` have shape ``(M, n)``, ``h`` ``(M,)`` and ``theta`` ``(S,)``;
-    returns ``(M, S, n)``.
+    ``y0, f0, y1, f1`` have shape ``(M, n)``, ``h`` ``(M,)`` and ``theta`` ``(S,)``
+    (shared) or ``(M, S)`` (per row); returns ``(M, S, n)``.
     """
     hc = h[:, None, None]
     d = (y1 - y0)[:, None, :]
     a0 = y0[:, None, :]
     hf0 = hc * f0[:, None, :]
     hf1 = hc * f1[:, None, :]
-    th = theta[None, :, None]
+    th = theta[None, :, None] if theta.ndim == 1 else theta[:, :, None]
     return a0 + th * (hf0 + th * ((3.0 * d - 2.0 * hf0 - hf1) + th * (hf0 + hf1 - 2.0 * d)))
 
 

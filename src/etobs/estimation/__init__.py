@@ -1,0 +1,23 @@
+"""The paper's event-triggered estimator assembled as a hybrid system, its simulation and metrics."""
+
+from etobs.estimation.metrics import (
+    inter_event_times,
+    max_estimation_error,
+    min_inter_event_time,
+    transmission_counts,
+)
+from etobs.estimation.problem import EstimationProblem, StateLayout
+from etobs.estimation.result import EstimationResult, Trajectory
+from etobs.estimation.simulate import simulate
+
+__all__ = [
+    "EstimationProblem",
+    "EstimationResult",
+    "StateLayout",
+    "Trajectory",
+    "inter_event_times",
+    "max_estimation_error",
+    "min_inter_event_time",
+    "simulate",
+    "transmission_counts",
+]

@@ -1,0 +1,128 @@
+"""Result of :func:`~etobs.estimation.simulate`: the hybrid solution read in the paper's terms."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from etobs.errors import InputError
+from etobs.estimation.problem import EstimationProblem
+from etobs.hybrid.solution import HybridSolution, JumpLog
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """States of the estimator at a set of hybrid times.
+
+    For one run's arc the arrays have a leading axis of length ``K`` (points); on a save
+    grid they have two leading axes ``(B, G)`` (runs, grid points).
+
+    Attributes
+    ----------
+    t, j : ndarray
+        Hybrid times.
+    x, z, xhat, ybar, e : ndarray
+        Plant state, observer state, estimate ``psi(z)``, held outputs, and
+        network-induced error ``e = ybar - ytilde`` (eq. (46)).
+    eta : ndarray
+        ``eta_i`` of each node (first entry of its rule state; NaN for stateless rules).
+
+    """
+
+    t: np.ndarray
+    j: np.ndarray
+    x: np.ndarray
+    z: np.ndarray
+    xhat: np.ndarray
+    ybar: np.ndarray
+    e: np.ndarray
+    eta: np.ndarray
+
+    @property
+    def error(self) -> np.ndarray:
+        """Estimation error norm ``|x - xhat|``."""
+        return np.linalg.norm(self.x - self.xhat, axis=-1)
+
+
+@dataclass(frozen=True)
+class EstimationResult:
+    """Per-run status, transmission log and trajectories of a simulation.
+
+    Nodes are indexed from 0 (node 0 is the paper's sensor 1).
+    """
+
+    problem: EstimationProblem
+    solution: HybridSolution
+
+    @property
+    def n_runs(self) -> int:
+        """Number of runs ``B``."""
+        return self.solution.n_runs
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of sensor nodes ``N``."""
+        return self.problem.n_nodes
+
+    @property
+    def ok(self) -> bool:
+        """Whether every run completed."""
+        return self.solution.ok
+
+    @property
+    def transmissions(self) -> JumpLog:
+        """Every transmission: ``(run, rule=node, t, j)`` rows sorted by run then ``j``."""
+        return self.solution.jumps
+
+    def status_labels(self) -> list[str]:
+        """Status of each run (``"completed"``, ``"max_jumps"``, ...)."""
+        return self.solution.status_labels()
+
+    def messages(self) -> list[str]:
+        """How each run ended, with the fix for failures."""
+        return self.solution.messages()
+
+    def transmission_times(self, run: int, node: int) -> np.ndarray:
+        """Transmission times of ``node`` in ``run``."""
+        return self.transmissions.times(run, node)
+
+    def arc(self, run: int) -> Trajectory:
+        """The full hybrid arc of ``run`` (requires ``SaveAt(steps=True)``)."""
+        arcs = self.solution.arcs
+        if arcs is None:
+            raise InputError("this result kept no arcs: simulate with save=SaveAt(steps=True)")
+        if not 0 <= run < self.n_runs:
+            raise InputError(f"`run` must be in 0..{self.n_runs - 1}; got {run}")
+        a = arcs[run]
+        return self._trajectory(a.t, a.j, a.x)
+
+    def on_grid(self) -> Trajectory:
+        """States of every run on the save grid, arrays of shape ``(B, G, ...)``."""
+        g = self.solution.grid
+        if g is None:
+            raise InputError("this result kept no grid: simulate with save=SaveAt(grid=...)")
+        t = np.broadcast_to(g.t, g.j.shape)
+        return self._trajectory(t, g.j, g.x)
+
+    def _trajectory(self, t: np.ndarray, j: np.ndarray, q: np.ndarray) -> Trajectory:
+        pb, lay = self.problem, self.problem.layout
+        flat = q.reshape(-1, q.shape[-1])
+        tf = np.asarray(t, dtype=float).reshape(-1)
+        x, z, ybar = flat[:, lay.x], flat[:, lay.z], flat[:, lay.ybar]
+        with np.errstate(invalid="ignore"):
+            e = ybar - pb.ytilde(tf, x)
+            xhat = pb.psi(z)
+        eta = np.full((flat.shape[0], pb.n_nodes), np.nan)
+        for i, sl in enumerate(lay.rule):
+            if sl.stop > sl.start:
+                eta[:, i] = flat[:, sl.start]
+        lead = q.shape[:-1]
+
+        def shape(a: np.ndarray) -> np.ndarray:
+            return a.reshape(*lead, a.shape[-1])
+
+        return Trajectory(
+            t=np.asarray(t), j=np.asarray(j), x=shape(x), z=shape(z), xhat=shape(xhat),
+            ybar=shape(ybar), e=shape(e), eta=shape(eta),
+        )

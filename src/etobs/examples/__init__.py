@@ -1,0 +1,5 @@
+"""Ready-made systems: the paper's robot arm."""
+
+from etobs.examples.robot_arm import L_PAPER, X0_PAPER, random_initial_states, robot_arm
+
+__all__ = ["L_PAPER", "X0_PAPER", "random_initial_states", "robot_arm"]

@@ -1,0 +1,184 @@
+"""Reference backend: one run at a time with :func:`scipy.integrate.solve_ivp`.
+
+Slow and simple, it exists to cross-check the fast solver with an independent
+integrator and event locator. Each flow segment is a ``solve_ivp`` call (method
+``DOP853``) with one terminal event per rule, restarted after every jump.
+
+``solve_ivp`` tests the sign of an event function only at step ends, so it misses an
+excursion above zero that starts and ends inside one step. As a guard, every step of
+every segment is also sampled at ``event_samples`` points on ``solve_ivp``'s dense
+output; the earliest crossing found either way is refined with :func:`scipy.optimize.brentq`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from etobs import _validate as v
+from etobs.errors import InputError
+from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.recorder import Recorder
+from etobs.hybrid.solution import HybridSolution
+from etobs.hybrid.solver import check_span
+from etobs.hybrid.status import Status
+from etobs.hybrid.system import HybridSystem
+
+# After brentq (or solve_ivp's own location), the event time is moved right by at most
+# this many xtol/4 until an event function is >= 0 there, so the state is in the jump
+# set, as in the fast solver.
+_NUDGES = 64
+
+
+def solve_reference(
+    system: HybridSystem,
+    x0: Any,
+    t_span: Any,
+    *,
+    options: SolverOptions | None = None,
+    save: SaveAt | None = None,
+) -> HybridSolution:
+    """Solve each run with ``solve_ivp``; same arguments and result as :func:`~etobs.hybrid.solve`.
+
+    ``options.method`` is ignored (``solve_ivp``'s ``DOP853`` is always used).
+    """
+    if not isinstance(system, HybridSystem):
+        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
+    t0, t_end = check_span(t_span)
+    X = v.batch("x0", x0, system.n)
+    opts = options or SolverOptions()
+    save = save or SaveAt()
+    B = X.shape[0]
+    rec = Recorder(B, system.n, save, t0)
+    status = np.full(B, Status.RUNNING, dtype=np.int64)
+    t_final, j_final = np.full(B, t0), np.zeros(B, dtype=np.int64)
+    x_final = X.copy()
+    n_steps = np.zeros(B, dtype=np.int64)
+    for b in range(B):
+        run = _Run(system, b, X[b], t0, t_end, opts, rec)
+        status[b] = run.solve()
+        t_final[b], j_final[b], x_final[b], n_steps[b] = run.t, run.j, run.x, run.n_steps
+    return HybridSolution(
+        t_span=(t0, t_end), status=status, t_final=t_final, j_final=j_final, x_final=x_final,
+        jumps=rec.jump_log(), arcs=rec.arcs(), grid=rec.saved_grid(), n_steps=n_steps,
+        n_rejected=np.zeros(B, dtype=np.int64), rule_names=system.rule_names, backend="scipy",
+    )
+
+
+class _Run:
+    def __init__(
+        self, system: HybridSystem, b: int, x0: np.ndarray, t0: float, t_end: float,
+        opts: SolverOptions, rec: Recorder,
+    ) -> None:
+        self.sys, self.b, self.opts, self.rec = system, np.array([b]), opts, rec
+        self.t, self.x, self.j, self.t_end = t0, x0.copy(), 0, t_end
+        self.n_steps = 0
+
+    def g(self, t: float | np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Event functions at one time (x: (n,)) or many (x: (K, n)); returns (m,) or (K, m)."""
+        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        xx = np.atleast_2d(x)
+        out = np.asarray(self.sys.guard(tt, xx), dtype=float)
+        return out[0] if np.ndim(x) == 1 else out
+
+    def keep(self, t: float, x: np.ndarray) -> None:
+        self.rec.steps(self.b, np.array([t]), np.array([self.j]), x[None])
+
+    def solve(self) -> Status:
+        self.keep(self.t, self.x)
+        row, gi = self.rec.grid_due(self.b, np.array([self.t]))
+        self.rec.grid_fill(self.b[row], gi, np.array([self.j] * row.size), np.repeat(self.x[None], row.size, 0))
+        st = self.jumps()
+        while st is Status.RUNNING and self.t < self.t_end:
+            st = self.segment()
+        return Status.COMPLETED if st is Status.RUNNING else st
+
+    def jumps(self) -> Status:
+        """Apply jumps until every event function is negative."""
+        while True:
+            fire = np.flatnonzero(self.g(self.t, self.x) >= 0)
+            if fire.size == 0:
+                return Status.RUNNING
+            for k in fire:
+                if self.j >= self.opts.max_jumps:
+                    return Status.MAX_JUMPS
+                xn = np.asarray(self.sys.jump(int(k), np.array([self.t]), self.x[None]), dtype=float)[0]
+                self.rec.jumps(self.b, int(k), np.array([self.t]), np.array([self.j]))
+                self.j += 1
+                self.x = xn
+                self.keep(self.t, xn)
+                if not np.all(np.isfinite(xn)):
+                    return Status.NONFINITE
+
+    def segment(self) -> Status:
+        """Flow from the current state to the next event (or the end), then jump."""
+        o, sys_, m = self.opts, self.sys, self.sys.n_rules
+
+        def fun(t: float, x: np.ndarray) -> np.ndarray:
+            return np.asarray(sys_.flow(np.array([t]), x[None]), dtype=float)[0]
+
+        events = []
+        for k in range(m):
+            def ev(t: float, x: np.ndarray, k: int = k) -> float:
+                return float(self.g(t, x)[k])
+
+            ev.terminal = True  # type: ignore[attr-defined]
+            ev.direction = 1.0  # type: ignore[attr-defined]
+            events.append(ev)
+        sol = solve_ivp(
+            fun, (self.t, self.t_end), self.x, method="DOP853", rtol=o.rtol, atol=o.atol,
+            max_step=o.max_step, events=events or None, dense_output=True,
+        )
+        if sol.status == -1:
+            return Status.NONFINITE if not np.all(np.isfinite(sol.y[:, -1])) else Status.STEP_UNDERFLOW
+        self.n_steps += sol.t.size - 1
+        dense = sol.sol
+        t_stop, bracket = float(sol.t[-1]), None
+        if sol.status == 1:
+            t_hit = min(float(te[0]) for te in sol.t_events if te.size)
+            bracket = (float(sol.t[-2]) if sol.t.size > 1 else self.t, t_hit)
+        # Guard: sample every step; an earlier sign change overrides solve_ivp's event.
+        ts = np.asarray(dense.ts)
+        S = o.event_samples
+        theta = np.arange(1, S + 1) / S
+        times = (ts[:-1, None] + np.diff(ts)[:, None] * theta[None, :]).ravel()
+        if m and times.size:
+            gs = self.g(times, dense(times).T)
+            hit = np.flatnonzero((gs >= 0).any(axis=1))
+            if hit.size and (bracket is None or times[hit[0]] < bracket[1]):
+                k = hit[0]
+                left = times[k - 1] if k > 0 else self.t
+                bracket = (float(left), float(times[k]))
+        if bracket is not None:
+            t_stop = self.locate(dense, *bracket)
+        x_stop = dense(t_stop) if t_stop < float(sol.t[-1]) or bracket is not None else sol.y[:, -1]
+        keep_t = sol.t[1:][sol.t[1:] < t_stop]
+        for tk, xk in zip(keep_t, sol.y[:, 1:][:, : keep_t.size].T, strict=True):
+            self.keep(float(tk), xk)
+        row, gi = self.rec.grid_due(self.b, np.array([t_stop]))
+        if row.size:
+            xs = dense(self.rec.grid_t[gi]).T
+            self.rec.grid_fill(self.b[row], gi, np.full(row.size, self.j), xs)
+        self.t, self.x = t_stop, np.asarray(x_stop, dtype=float)
+        self.keep(self.t, self.x)
+        if bracket is None:
+            self.t = self.t_end
+            return Status.RUNNING
+        return self.jumps()
+
+    def locate(self, dense: Any, a: float, b: float) -> float:
+        """Earliest crossing in ``[a, b]`` (some g(b) >= 0), returned where ``g >= 0``."""
+        ga, gb = self.g(a, dense(a)), self.g(b, dense(b))
+        best = b
+        for k in np.flatnonzero((ga < 0) & (gb >= 0)):
+            r = brentq(lambda s, k=k: float(self.g(s, dense(s))[k]), a, b, xtol=self.opts.event_xtol / 4,
+                       rtol=4 * np.finfo(float).eps)
+            best = min(best, r)
+        for _ in range(_NUDGES):
+            if np.any(self.g(best, dense(best)) >= 0):
+                break
+            best += self.opts.event_xtol / 4
+        return best

@@ -1,0 +1,29 @@
+"""Model objects: plant, observer, nodes, triggering rules, class-K functions, signals."""
+
+from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
+from etobs.model.node import Node
+from etobs.model.observer import Observer, luenberger
+from etobs.model.plant import Plant
+from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule, TriggerRule
+from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
+
+__all__ = [
+    "Constant",
+    "Custom",
+    "DynamicRule",
+    "FunctionSignal",
+    "KFunction",
+    "Linear",
+    "Node",
+    "Observer",
+    "PeriodicRule",
+    "Plant",
+    "Power",
+    "Quadratic",
+    "Signal",
+    "Sinusoid",
+    "StaticRule",
+    "TriggerRule",
+    "Zero",
+    "luenberger",
+]

@@ -1,0 +1,157 @@
+"""Class-K∞ functions used as ``alpha_i`` and ``gamma_i`` in the triggering rules.
+
+All act elementwise on arrays of non-negative reals. ``Linear(a)`` is ``a*s`` and
+``Quadratic(ell)`` is ``ell*s**2`` (the paper's ``𝔩_i s^2``); :class:`Custom` wraps any
+user function after a sanity check that it is zero at zero and increasing.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.errors import InputError
+
+
+class KFunction(ABC):
+    """A class-K∞ function ``[0, ∞) → [0, ∞)``: continuous, zero at zero, increasing, unbounded."""
+
+    @abstractmethod
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        """Evaluate elementwise."""
+
+    @abstractmethod
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        """Evaluate the inverse function elementwise."""
+
+
+@dataclass(frozen=True)
+class Linear(KFunction):
+    """``a * s`` with ``a > 0``."""
+
+    a: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "a", v.real("a", self.a, lower=0.0, lower_open=True))
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        return self.a * s
+
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        return np.asarray(r) / self.a
+
+    def __str__(self) -> str:
+        return f"{self.a:g}*s"
+
+
+@dataclass(frozen=True)
+class Quadratic(KFunction):
+    """``ell * s**2`` with ``ell > 0`` (the paper's ``𝔩 s²``)."""
+
+    ell: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "ell", v.real("ell", self.ell, lower=0.0, lower_open=True))
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        return self.ell * (s * s)
+
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.asarray(r) / self.ell)
+
+    def __str__(self) -> str:
+        return f"{self.ell:g}*s^2"
+
+
+@dataclass(frozen=True)
+class Power(KFunction):
+    """``k * s**p`` with ``k > 0`` and ``p > 0``."""
+
+    k: float
+    p: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "k", v.real("k", self.k, lower=0.0, lower_open=True))
+        object.__setattr__(self, "p", v.real("p", self.p, lower=0.0, lower_open=True))
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        return self.k * np.power(s, self.p)
+
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        return np.power(np.asarray(r) / self.k, 1.0 / self.p)
+
+    def __str__(self) -> str:
+        return f"{self.k:g}*s^{self.p:g}"
+
+
+_PROBE = np.array([0.0, 1e-3, 0.1, 1.0, 10.0, 1e3])
+
+
+@dataclass(frozen=True)
+class Custom(KFunction):
+    """A user class-K∞ function.
+
+    Parameters
+    ----------
+    fn : callable
+        Vectorized ``fn(s) -> r``.
+    inv : callable, optional
+        Its inverse; when absent, :meth:`inverse` solves ``fn(s) = r`` numerically.
+    name : str
+        Shown in reports.
+
+    """
+
+    fn: Callable[[np.ndarray], np.ndarray]
+    inv: Callable[[np.ndarray], np.ndarray] | None = None
+    name: str = field(default="custom")
+
+    def __post_init__(self) -> None:
+        v.function("fn", self.fn)
+        if self.inv is not None:
+            v.function("inv", self.inv)
+        vals = np.asarray(self.fn(_PROBE), dtype=float)
+        if vals.shape != _PROBE.shape or not np.all(np.isfinite(vals)):
+            raise InputError(
+                f"`fn` must map an array of shape {_PROBE.shape} to finite values of the same shape; "
+                f"got {vals!r}"
+            )
+        if vals[0] != 0.0 or np.any(np.diff(vals) <= 0):
+            raise InputError(
+                f"`fn` must be a class-K∞ function (zero at 0, increasing); at s={_PROBE.tolist()} "
+                f"it gives {vals.tolist()}"
+            )
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        return self.fn(s)
+
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        if self.inv is not None:
+            return self.inv(r)
+        from scipy.optimize import brentq
+
+        def one(ri: float) -> float:
+            if ri <= 0:
+                return 0.0
+            hi = 1.0
+            while float(self.fn(np.array(hi))) < ri:
+                hi *= 2.0
+            return brentq(lambda s: float(self.fn(np.array(s))) - ri, 0.0, hi, xtol=1e-14)
+
+        return np.vectorize(one, otypes=[float])(np.asarray(r, dtype=float))
+
+    def __str__(self) -> str:
+        return self.name
+
+
+def as_kfunction(name: str, value: object) -> KFunction:
+    """Accept a :class:`KFunction` or a plain callable (wrapped in :class:`Custom`)."""
+    if isinstance(value, KFunction):
+        return value
+    if callable(value):
+        return Custom(value, name=name)
+    raise InputError(f"`{name}` must be a KFunction (e.g. Linear(2.0), Quadratic(5.0)); got {value!r}")

@@ -1,0 +1,203 @@
+"""Triggering rules of the sensor nodes.
+
+A rule sees only its own node: the gap ``e_i = ybar_i - ytilde_i`` between the value
+last sent and the current measurement, and its own internal state ``s_i`` (``eta_i``
+for the paper's dynamic rule, a clock for the periodic rule, nothing for the static
+rule). It defines
+
+* ``derivative(t, e, s)``: ``s_i'`` along flows;
+* ``trigger(t, e, s)``: the trigger function; the node transmits when it is ``>= 0``;
+* ``reset(t, s)``: ``s_i+`` at the node's own transmission.
+
+All methods are vectorized over runs: ``t`` has shape ``(B,)``, ``e`` ``(B, n_yi)`` and
+``s`` ``(B, n_state)``. The same objects drive the simulator and, later, the deployed
+sensor nodes.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.model.functions import KFunction, Linear, as_kfunction
+
+
+def _norm(e: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row: ``|e_i|``."""
+    if e.shape[1] == 1:
+        return np.abs(e[:, 0])
+    return np.sqrt(np.einsum("ij,ij->i", e, e))
+
+
+class TriggerRule(ABC):
+    """Interface of a node's triggering rule (see the module docstring)."""
+
+    @property
+    @abstractmethod
+    def n_state(self) -> int:
+        """Size of the rule's internal state."""
+
+    @abstractmethod
+    def initial_state(self) -> np.ndarray:
+        """The internal state at ``t = 0``, shape ``(n_state,)``."""
+
+    @abstractmethod
+    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """``s'`` along flows, shape ``(B, n_state)``."""
+
+    @abstractmethod
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Trigger function, shape ``(B,)``: transmit when ``>= 0``."""
+
+    @abstractmethod
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Internal state right after the node's own transmission."""
+
+
+@dataclass(frozen=True)
+class DynamicRule(TriggerRule):
+    """The paper's dynamic triggering rule, eq. (14)--(15).
+
+    ``eta' = -alpha(eta) + c*gamma(|e|)`` along flows, ``eta+ = b*eta`` at the node's
+    transmission, and transmission when ``gamma(|e|) >= sigma*alpha(eta) + eps``.
+
+    Parameters
+    ----------
+    gamma : KFunction
+        ``gamma_i``, e.g. ``Quadratic(5.0)`` for ``5 s²``.
+    alpha : KFunction
+        ``alpha_i``, e.g. ``Linear(2.0)``.
+    sigma : float
+        ``sigma_i >= 0``; ``sigma = 0`` gives the static absolute-threshold rule.
+    c : float
+        ``c_i >= 0``.
+    b : float
+        ``b_i`` in ``[0, 1]``.
+    eps : float
+        ``eps_i > 0`` (prevents Zeno behaviour).
+    eta0 : float
+        ``eta_i(0) >= 0``.
+
+    Examples
+    --------
+    The robot arm's first node:
+
+    >>> from etobs.model import DynamicRule, Linear, Quadratic
+    >>> DynamicRule(gamma=Quadratic(5), alpha=Linear(2), sigma=600, c=0.001, b=1, eps=10, eta0=10)
+    DynamicRule(gamma=Quadratic(ell=5.0), alpha=Linear(a=2.0), sigma=600.0, c=0.001, b=1.0, eps=10.0, eta0=10.0)
+
+    """
+
+    gamma: KFunction
+    alpha: KFunction = field(default_factory=lambda: Linear(1.0))
+    sigma: float = 0.0
+    c: float = 0.0
+    b: float = 1.0
+    eps: float = 1.0
+    eta0: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
+        object.__setattr__(self, "alpha", as_kfunction("alpha", self.alpha))
+        object.__setattr__(self, "sigma", v.real("sigma", self.sigma, lower=0.0))
+        object.__setattr__(self, "c", v.real("c", self.c, lower=0.0))
+        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
+
+    @property
+    def n_state(self) -> int:
+        return 1
+
+    def initial_state(self) -> np.ndarray:
+        return np.array([self.eta0])
+
+    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (14): eta' = -alpha(eta) + c*gamma(|e|)
+        eta = s[:, 0]
+        return (-self.alpha(eta) + self.c * self.gamma(_norm(e)))[:, None]
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (15): transmit when gamma(|e|) >= sigma*alpha(eta) + eps
+        return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (14): eta+ = b*eta at the node's own transmission
+        return self.b * s
+
+
+@dataclass(frozen=True)
+class StaticRule(TriggerRule):
+    """Absolute-threshold rule ``gamma(|e|) >= eps`` (eq. (15) with ``sigma = 0``).
+
+    It has no internal state; it transmits exactly when :class:`DynamicRule` with
+    ``sigma = 0`` and the same ``gamma`` and ``eps`` does.
+    """
+
+    gamma: KFunction
+    eps: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+
+    @property
+    def n_state(self) -> int:
+        return 0
+
+    def initial_state(self) -> np.ndarray:
+        return np.empty(0)
+
+    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return np.empty((t.shape[0], 0))
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return self.gamma(_norm(e)) - self.eps
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return s
+
+
+@dataclass(frozen=True)
+class PeriodicRule(TriggerRule):
+    """Time-triggered baseline: transmit at ``first, first + period, first + 2*period, ...``.
+
+    The internal state is a clock ``tau`` with ``tau' = 1``, reset to ``0`` at each
+    transmission; the trigger function is ``tau - period``.
+
+    Parameters
+    ----------
+    period : float
+        Sampling period, ``> 0``.
+    first : float, optional
+        Time of the first transmission, ``>= 0`` (default: ``period``).
+
+    """
+
+    period: float
+    first: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "period", v.real("period", self.period, lower=0.0, lower_open=True))
+        first = self.period if self.first is None else self.first
+        object.__setattr__(self, "first", v.real("first", first, lower=0.0))
+
+    @property
+    def n_state(self) -> int:
+        return 1
+
+    def initial_state(self) -> np.ndarray:
+        assert self.first is not None  # set in __post_init__
+        return np.array([self.period - self.first])
+
+    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return np.ones_like(s)
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return s[:, 0] - self.period
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return np.zeros_like(s)
