@@ -85,5 +85,7 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
         raise InputError(f"the save grid has no point in the window [{lo:g}, {hi:g}]")
     err = traj.error[:, cols]
     with np.errstate(invalid="ignore"):
-        out = np.where(np.all(np.isfinite(err), axis=1), np.max(np.nan_to_num(err, nan=-np.inf), axis=1), np.nan)
+        out = np.where(
+            np.all(np.isfinite(err), axis=1), np.max(np.nan_to_num(err, nan=-np.inf), axis=1), np.nan
+        )
     return out

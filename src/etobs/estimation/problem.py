@@ -72,7 +72,9 @@ class EstimationProblem:
         object.__setattr__(self, "nodes", nodes)
         p = self.plant
         if self.observer.n_z < p.n_x:
-            raise InputError(f"observer `n_z` = {self.observer.n_z} is smaller than the plant's n_x = {p.n_x}")
+            raise InputError(
+                f"observer `n_z` = {self.observer.n_z} is smaller than the plant's n_x = {p.n_x}"
+            )
         _check_partition(nodes, p.n_y)
         object.__setattr__(self, "u", as_signal("u", self.u, p.n_u))
         object.__setattr__(self, "v", as_signal("v", self.v, p.n_v))
@@ -167,8 +169,7 @@ def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:
         problems.append(f"outputs {missing} belong to no node")
     if problems:
         raise InputError(
-            "the nodes' output sets must partition the outputs 0.."
-            f"{n_y - 1}: " + "; ".join(problems)
+            f"the nodes' output sets must partition the outputs 0..{n_y - 1}: " + "; ".join(problems)
         )
 
 

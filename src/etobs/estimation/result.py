@@ -123,6 +123,12 @@ class EstimationResult:
             return a.reshape(*lead, a.shape[-1])
 
         return Trajectory(
-            t=np.asarray(t), j=np.asarray(j), x=shape(x), z=shape(z), xhat=shape(xhat),
-            ybar=shape(ybar), e=shape(e), eta=shape(eta),
+            t=np.asarray(t),
+            j=np.asarray(j),
+            x=shape(x),
+            z=shape(z),
+            xhat=shape(xhat),
+            ybar=shape(ybar),
+            e=shape(e),
+            eta=shape(eta),
         )

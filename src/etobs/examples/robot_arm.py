@@ -18,12 +18,14 @@ from etobs import _validate as v
 from etobs.estimation.problem import EstimationProblem
 from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sinusoid
 
-A = np.array([
-    [0.0, 1.0, 0.0, 0.0],
-    [-48.6, -1.25, 48.6, 0.0],
-    [0.0, 0.0, 0.0, 1.0],
-    [19.5, 0.0, -19.5, 0.0],
-])
+A = np.array(
+    [
+        [0.0, 1.0, 0.0, 0.0],
+        [-48.6, -1.25, 48.6, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+        [19.5, 0.0, -19.5, 0.0],
+    ]
+)
 B = np.array([0.0, 21.6, 0.0, 0.0])
 G = np.array([0.0, 0.0, 0.0, -1.0])
 C = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
@@ -91,20 +93,29 @@ def robot_arm(
 
     plant = Plant(f_p=f_p, h=lambda x: x[:, :2], n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
     observer = Observer(f_o=f_o, n_z=4, name="polytopic Luenberger")
-    params = {k: _pair(k, val) for k, val in dict(sigma=sigma, c=c, b=b, a=a, ell=ell, eps=eps, eta0=eta0).items()}
+    params = {
+        k: _pair(k, val) for k, val in dict(sigma=sigma, c=c, b=b, a=a, ell=ell, eps=eps, eta0=eta0).items()
+    }
     nodes = tuple(
         Node(
             outputs=(i,),
             rule=DynamicRule(
-                gamma=Quadratic(params["ell"][i]), alpha=Linear(params["a"][i]), sigma=params["sigma"][i],
-                c=params["c"][i], b=params["b"][i], eps=params["eps"][i], eta0=params["eta0"][i],
+                gamma=Quadratic(params["ell"][i]),
+                alpha=Linear(params["a"][i]),
+                sigma=params["sigma"][i],
+                c=params["c"][i],
+                b=params["b"][i],
+                eps=params["eps"][i],
+                eta0=params["eta0"][i],
             ),
             name=f"sensor {i + 1}",
         )
         for i in range(2)
     )
     return EstimationProblem(
-        plant=plant, observer=observer, nodes=nodes,
+        plant=plant,
+        observer=observer,
+        nodes=nodes,
         u=Sinusoid(amplitude=[1.0], omega=1.0),
         v=Sinusoid(amplitude=amp_v, omega=0.4),
         m=Sinusoid(amplitude=amp_m, omega=0.3),

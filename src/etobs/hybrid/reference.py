@@ -62,16 +62,31 @@ def solve_reference(
         status[b] = run.solve()
         t_final[b], j_final[b], x_final[b], n_steps[b] = run.t, run.j, run.x, run.n_steps
     return HybridSolution(
-        t_span=(t0, t_end), status=status, t_final=t_final, j_final=j_final, x_final=x_final,
-        jumps=rec.jump_log(), arcs=rec.arcs(), grid=rec.saved_grid(), n_steps=n_steps,
-        n_rejected=np.zeros(B, dtype=np.int64), rule_names=system.rule_names, backend="scipy",
+        t_span=(t0, t_end),
+        status=status,
+        t_final=t_final,
+        j_final=j_final,
+        x_final=x_final,
+        jumps=rec.jump_log(),
+        arcs=rec.arcs(),
+        grid=rec.saved_grid(),
+        n_steps=n_steps,
+        n_rejected=np.zeros(B, dtype=np.int64),
+        rule_names=system.rule_names,
+        backend="scipy",
     )
 
 
 class _Run:
     def __init__(
-        self, system: HybridSystem, b: int, x0: np.ndarray, t0: float, t_end: float,
-        opts: SolverOptions, rec: Recorder,
+        self,
+        system: HybridSystem,
+        b: int,
+        x0: np.ndarray,
+        t0: float,
+        t_end: float,
+        opts: SolverOptions,
+        rec: Recorder,
     ) -> None:
         self.sys, self.b, self.opts, self.rec = system, np.array([b]), opts, rec
         self.t, self.x, self.j, self.t_end = t0, x0.copy(), 0, t_end
@@ -90,7 +105,9 @@ class _Run:
     def solve(self) -> Status:
         self.keep(self.t, self.x)
         row, gi = self.rec.grid_due(self.b, np.array([self.t]))
-        self.rec.grid_fill(self.b[row], gi, np.array([self.j] * row.size), np.repeat(self.x[None], row.size, 0))
+        self.rec.grid_fill(
+            self.b[row], gi, np.array([self.j] * row.size), np.repeat(self.x[None], row.size, 0)
+        )
         st = self.jumps()
         while st is Status.RUNNING and self.t < self.t_end:
             st = self.segment()
@@ -122,6 +139,7 @@ class _Run:
 
         events = []
         for k in range(m):
+
             def ev(t: float, x: np.ndarray, k: int = k) -> float:
                 return float(self.g(t, x)[k])
 
@@ -129,8 +147,15 @@ class _Run:
             ev.direction = 1.0  # type: ignore[attr-defined]
             events.append(ev)
         sol = solve_ivp(
-            fun, (self.t, self.t_end), self.x, method="DOP853", rtol=o.rtol, atol=o.atol,
-            max_step=o.max_step, events=events or None, dense_output=True,
+            fun,
+            (self.t, self.t_end),
+            self.x,
+            method="DOP853",
+            rtol=o.rtol,
+            atol=o.atol,
+            max_step=o.max_step,
+            events=events or None,
+            dense_output=True,
         )
         if sol.status == -1:
             return Status.NONFINITE if not np.all(np.isfinite(sol.y[:, -1])) else Status.STEP_UNDERFLOW
@@ -174,8 +199,13 @@ class _Run:
         ga, gb = self.g(a, dense(a)), self.g(b, dense(b))
         best = b
         for k in np.flatnonzero((ga < 0) & (gb >= 0)):
-            r = brentq(lambda s, k=k: float(self.g(s, dense(s))[k]), a, b, xtol=self.opts.event_xtol / 4,
-                       rtol=4 * np.finfo(float).eps)
+            r = brentq(
+                lambda s, k=k: float(self.g(s, dense(s))[k]),
+                a,
+                b,
+                xtol=self.opts.event_xtol / 4,
+                rtol=4 * np.finfo(float).eps,
+            )
             best = min(best, r)
         for _ in range(_NUDGES):
             if np.any(self.g(best, dense(best)) >= 0):

@@ -126,9 +126,7 @@ class HybridSolution:
 
     def messages(self) -> list[str]:
         """One sentence per run saying how it ended and, on failure, how to fix it."""
-        return [
-            status_message(Status(s), float(t)) for s, t in zip(self.status, self.t_final, strict=True)
-        ]
+        return [status_message(Status(s), float(t)) for s, t in zip(self.status, self.t_final, strict=True)]
 
     def status_labels(self) -> list[str]:
         """Status of each run as a lower-case label (``"completed"``, ``"max_jumps"``...)."""

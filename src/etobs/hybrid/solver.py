@@ -111,8 +111,13 @@ def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
 
 class _FastSolver:
     def __init__(
-        self, system: HybridSystem, x0: np.ndarray, t0: float, t_end: float,
-        opts: SolverOptions, save: SaveAt,
+        self,
+        system: HybridSystem,
+        x0: np.ndarray,
+        t0: float,
+        t_end: float,
+        opts: SolverOptions,
+        save: SaveAt,
     ) -> None:
         self.sys, self.opts, self.t0, self.t_end = system, opts, t0, t_end
         self.tab = TABLEAUS[opts.method]
@@ -158,10 +163,18 @@ class _FastSolver:
                 break
             self._advance(act)
         return HybridSolution(
-            t_span=(self.t0, self.t_end), status=self.status.copy(), t_final=self.t.copy(),
-            j_final=self.j.copy(), x_final=self.x.copy(), jumps=self.rec.jump_log(),
-            arcs=self.rec.arcs(), grid=self.rec.saved_grid(), n_steps=self.n_steps,
-            n_rejected=self.n_rejected, rule_names=self.sys.rule_names, backend="fast",
+            t_span=(self.t0, self.t_end),
+            status=self.status.copy(),
+            t_final=self.t.copy(),
+            j_final=self.j.copy(),
+            x_final=self.x.copy(),
+            jumps=self.rec.jump_log(),
+            arcs=self.rec.arcs(),
+            grid=self.rec.saved_grid(),
+            n_steps=self.n_steps,
+            n_rejected=self.n_rejected,
+            rule_names=self.sys.rule_names,
+            backend="fast",
         )
 
     def _refresh_flow(self, runs: np.ndarray) -> None:
@@ -259,8 +272,15 @@ class _FastSolver:
         self.status[still[self.status[still] == Status.RUNNING]] = Status.MAX_STEPS
 
     def _accept(
-        self, runs: np.ndarray, t0: np.ndarray, x0: np.ndarray, f0: np.ndarray, h: np.ndarray,
-        last: np.ndarray, K: np.ndarray, x1: np.ndarray,
+        self,
+        runs: np.ndarray,
+        t0: np.ndarray,
+        x0: np.ndarray,
+        f0: np.ndarray,
+        h: np.ndarray,
+        last: np.ndarray,
+        K: np.ndarray,
+        x1: np.ndarray,
     ) -> None:
         tab, o, m, n = self.tab, self.opts, self.m, self.n
         M = runs.size
@@ -297,8 +317,9 @@ class _FastSolver:
         pos[dense_rows] = np.arange(dense_rows.size)
         Q = None
         if dense_rows.size:
-            Q = tab.dense(self.flow, t0[dense_rows], x0[dense_rows], x1[dense_rows],
-                          K[:, dense_rows], h[dense_rows])
+            Q = tab.dense(
+                self.flow, t0[dense_rows], x0[dense_rows], x1[dense_rows], K[:, dense_rows], h[dense_rows]
+            )
 
         def at(rows: np.ndarray, th: np.ndarray) -> np.ndarray:
             """Dense-output state of step rows ``rows`` at ``θ = th``."""
@@ -382,8 +403,9 @@ class _FastSolver:
             r = rows[sel]
             return self.guard(t0[r] + th * h[r], at(r, th))[np.arange(sel.size), rule[sel]]
 
-        _, hi = bracket_root(fun, lo_all[pr], hi_all[pr], g_left[pr, rule], g_right[pr, rule],
-                             self.opts.event_xtol / h[rows])
+        _, hi = bracket_root(
+            fun, lo_all[pr], hi_all[pr], g_left[pr, rule], g_right[pr, rule], self.opts.event_xtol / h[rows]
+        )
         best = np.full(C, np.inf)
         np.minimum.at(best, c_idx[pr], hi)
         out[c_idx] = best[c_idx]

@@ -129,8 +129,9 @@ class Tableau:
         return y + acc
 
 
-def hermite(y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, h: np.ndarray,
-            theta: np.ndarray) -> np.ndarray:
+def hermite(
+    y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, h: np.ndarray, theta: np.ndarray
+) -> np.ndarray:
     """Cubic Hermite interpolant on each step, a cheap first look between step ends.
 
     ``y0, f0, y1, f1`` have shape ``(M, n)``, ``h`` ``(M,)`` and ``theta`` ``(S,)``
@@ -150,19 +151,33 @@ def _dopri5() -> Tableau:
     a = np.zeros((s, s))
     a[:, : RK45.A.shape[1]] = RK45.A
     return Tableau(
-        name="dopri5", order=5, error_order=4, a=a, b=np.asarray(RK45.B, float),
-        c=np.asarray(RK45.C, float), e=np.asarray(RK45.E, float), e_low=None,
-        dense_a=None, dense_c=None, dense_d=np.asarray(RK45.P, float),
+        name="dopri5",
+        order=5,
+        error_order=4,
+        a=a,
+        b=np.asarray(RK45.B, float),
+        c=np.asarray(RK45.C, float),
+        e=np.asarray(RK45.E, float),
+        e_low=None,
+        dense_a=None,
+        dense_c=None,
+        dense_d=np.asarray(RK45.P, float),
     )
 
 
 def _dop853() -> Tableau:
     s = DOP853.n_stages
     return Tableau(
-        name="dop853", order=8, error_order=7, a=np.asarray(DOP853.A[:s, :s], float),
-        b=np.asarray(DOP853.B, float), c=np.asarray(DOP853.C[:s], float),
-        e=np.asarray(DOP853.E5, float), e_low=np.asarray(DOP853.E3, float),
-        dense_a=np.asarray(DOP853.A_EXTRA, float), dense_c=np.asarray(DOP853.C_EXTRA, float),
+        name="dop853",
+        order=8,
+        error_order=7,
+        a=np.asarray(DOP853.A[:s, :s], float),
+        b=np.asarray(DOP853.B, float),
+        c=np.asarray(DOP853.C[:s], float),
+        e=np.asarray(DOP853.E5, float),
+        e_low=np.asarray(DOP853.E3, float),
+        dense_a=np.asarray(DOP853.A_EXTRA, float),
+        dense_c=np.asarray(DOP853.C_EXTRA, float),
         dense_d=np.asarray(DOP853.D, float),
     )
 
