@@ -86,8 +86,9 @@ class DynamicRule(TriggerRule):
     The robot arm's first node:
 
     >>> from etobs.model import DynamicRule, Linear, Quadratic
-    >>> DynamicRule(gamma=Quadratic(5), alpha=Linear(2), sigma=600, c=0.001, b=1, eps=10, eta0=10)
-    DynamicRule(gamma=Quadratic(ell=5.0), alpha=Linear(a=2.0), sigma=600.0, c=0.001, b=1.0, eps=10.0, eta0=10.0)
+    >>> rule = DynamicRule(gamma=Quadratic(5), alpha=Linear(2), sigma=600, c=0.001, b=1, eps=10, eta0=10)
+    >>> rule.sigma * rule.c < 1  # the condition of Theorem 1
+    True
 
     """
 
