@@ -22,6 +22,13 @@ from scipy.integrate import DOP853, RK45
 Flow = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
+def _combine(w: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``sum_k w[k] * K[k]`` for stage arrays ``K`` (k, M, n), as one matrix product."""
+    k = w.shape[-1]
+    flat = K[:k].reshape(k, -1)
+    return np.dot(w, flat).reshape(*w.shape[:-1], *K.shape[1:])
+
+
 @dataclass(frozen=True)
 class Tableau:
     """An explicit embedded RK pair with first-same-as-last stage and dense output."""
@@ -60,9 +67,9 @@ class Tableau:
         K[0] = f
         hc = h[:, None]
         for i in range(1, s):
-            dy = np.tensordot(self.a[i, :i], K[:i], axes=1)
+            dy = _combine(self.a[i, :i], K)
             K[i] = flow(t + self.c[i] * h, y + hc * dy)
-        y_new = y + hc * np.tensordot(self.b, K[:s], axes=1)
+        y_new = y + hc * _combine(self.b, K)
         K[s] = flow(t + h, y_new)
         return K, y_new
 
@@ -72,11 +79,11 @@ class Tableau:
         """Scaled RMS error norm of each run (accept the step where it is ``<= 1``)."""
         scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_new))
         n = y.shape[1]
-        err = np.tensordot(self.e, K, axes=1) / scale
+        err = _combine(self.e, K) / scale
         if self.e_low is None:
             return np.abs(h) * np.sqrt(np.einsum("ij,ij->i", err, err) / n)
         # DOP853: the 5th-order estimate is corrected by the 3rd-order one (Hairer et al.)
-        err3 = np.tensordot(self.e_low, K, axes=1) / scale
+        err3 = _combine(self.e_low, K) / scale
         e5 = np.einsum("ij,ij->i", err, err)
         e3 = np.einsum("ij,ij->i", err3, err3)
         denom = e5 + 0.01 * e3
@@ -94,19 +101,19 @@ class Tableau:
         hc = h[:, None]
         if self.dense_a is None:
             # Dormand--Prince 5(4): y(θ) = y0 + h Σ_k (K^T P)_k θ^(k+1)
-            return hc[None] * np.tensordot(self.dense_d.T, K, axes=1)
+            return hc[None] * _combine(self.dense_d.T, K)
         s = self.stages + 1
         Kx = np.empty((s + self.dense_a.shape[0], *y.shape))
         Kx[:s] = K
         for r, (arow, cr) in enumerate(zip(self.dense_a, self.dense_c, strict=True)):
             m = s + r
-            Kx[m] = flow(t + cr * h, y + hc * np.tensordot(arow[:m], Kx[:m], axes=1))
+            Kx[m] = flow(t + cr * h, y + hc * _combine(arow[:m], Kx))
         dy = y_new - y
         Q = np.empty((7, *y.shape))
         Q[0] = dy
         Q[1] = hc * K[0] - dy
         Q[2] = 2.0 * dy - hc * (K[-1] + K[0])
-        Q[3:] = hc[None] * np.tensordot(self.dense_d, Kx, axes=1)
+        Q[3:] = hc[None] * _combine(self.dense_d, Kx)
         return Q
 
     def evaluate(self, Q: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:

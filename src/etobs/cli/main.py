@@ -1,0 +1,31 @@
+"""The ``etobs`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from etobs import __version__
+from etobs.cli import demo
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``etobs`` command."""
+    parser = argparse.ArgumentParser(
+        prog="etobs", description="Decentralized event-triggered state estimation of nonlinear systems."
+    )
+    parser.add_argument("--version", action="version", version=f"etobs {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    demo.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: parse ``argv`` and run the chosen command."""
+    args = build_parser().parse_args(argv)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
