@@ -40,8 +40,20 @@ for _arr in (A, B, G, C, L_PAPER):
     _arr.setflags(write=False)
 
 
+def _matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Rows of ``x @ M.T`` as elementwise multiply-adds in a fixed order.
+
+    A BLAS product may sum in an order that depends on the batch size; this keeps each
+    run's result bit-for-bit independent of the other runs it is batched with.
+    """
+    out = x[:, :1] * M[:, 0]
+    for k in range(1, M.shape[1]):
+        out += x[:, k : k + 1] * M[:, k]
+    return out
+
+
 def _model(t: np.ndarray, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return x @ A.T + u * B + (SECTOR * np.sin(x[:, 2]))[:, None] * G
+    return _matvec(A, x) + u * B + (SECTOR * np.sin(x[:, 2]))[:, None] * G
 
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
@@ -89,7 +101,7 @@ def robot_arm(
 
     def f_o(t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
         # eq. (57) run on the held outputs: xhat' = A xhat + B u + G σ(H xhat) + L (ybar - C xhat)
-        return _model(t, z, u) + (ybar - yhat) @ gain.T
+        return _model(t, z, u) + _matvec(gain, ybar - yhat)
 
     plant = Plant(f_p=f_p, h=lambda x: x[:, :2], n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
     observer = Observer(f_o=f_o, n_z=4, name="polytopic Luenberger")

@@ -7,7 +7,8 @@ integrator and event locator. Each flow segment is a ``solve_ivp`` call (method
 ``solve_ivp`` tests the sign of an event function only at step ends, so it misses an
 excursion above zero that starts and ends inside one step. As a guard, every step of
 every segment is also sampled at ``event_samples`` points on ``solve_ivp``'s dense
-output; the earliest crossing found either way is refined with :func:`scipy.optimize.brentq`.
+output, plus one probe where a parabola through three samples predicts a peak above
+zero; the earliest crossing found either way is refined with :func:`scipy.optimize.brentq`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from etobs.errors import InputError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import HybridSolution
-from etobs.hybrid.solver import check_span
+from etobs.hybrid.solver import peak_probe, check_span
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import HybridSystem
 
@@ -165,18 +166,12 @@ class _Run:
         if sol.status == 1:
             t_hit = min(float(te[0]) for te in sol.t_events if te.size)
             bracket = (float(sol.t[-2]) if sol.t.size > 1 else self.t, t_hit)
-        # Guard: sample every step; an earlier sign change overrides solve_ivp's event.
-        ts = np.asarray(dense.ts)
-        S = o.event_samples
-        theta = np.arange(1, S + 1) / S
-        times = (ts[:-1, None] + np.diff(ts)[:, None] * theta[None, :]).ravel()
-        if m and times.size:
-            gs = self.g(times, dense(times).T)
-            hit = np.flatnonzero((gs >= 0).any(axis=1))
-            if hit.size and (bracket is None or times[hit[0]] < bracket[1]):
-                k = hit[0]
-                left = times[k - 1] if k > 0 else self.t
-                bracket = (float(left), float(times[k]))
+        # Guard: sample every step (and probe predicted peaks); an earlier crossing
+        # overrides solve_ivp's event.
+        if m:
+            early = self.scan(dense, float(self.t))
+            if early is not None and (bracket is None or early[1] < bracket[1]):
+                bracket = early
         if bracket is not None:
             t_stop = self.locate(dense, *bracket)
         x_stop = dense(t_stop) if t_stop < float(sol.t[-1]) or bracket is not None else sol.y[:, -1]
@@ -193,6 +188,28 @@ class _Run:
             self.t = self.t_end
             return Status.RUNNING
         return self.jumps()
+
+    def scan(self, dense: Any, t_start: float) -> tuple[float, float] | None:
+        """First sampled crossing on the steps of ``dense``, as a bracket, or None."""
+        ts = np.asarray(dense.ts)
+        S, m = self.opts.event_samples, self.sys.n_rules
+        times = ts[:-1, None] + np.diff(ts)[:, None] * (np.arange(1, S + 1) / S)[None, :]
+        gs = self.g(times.ravel(), dense(times.ravel()).T).reshape(times.shape[0], S, m)
+        g_start = np.concatenate([self.g(t_start, dense(t_start))[None], gs[:-1, -1]], axis=0)
+        probe = peak_probe(np.concatenate([g_start[:, None], gs], axis=1))
+        k = np.flatnonzero(np.isfinite(probe))
+        t_all, g_all = times.ravel(), gs.reshape(-1, m)
+        if k.size:
+            tp = ts[k] + probe[k] * np.diff(ts)[k]
+            t_all = np.concatenate([t_all, tp])
+            g_all = np.concatenate([g_all, self.g(tp, dense(tp).T)])
+        order = np.argsort(t_all, kind="stable")
+        t_all, g_all = t_all[order], g_all[order]
+        hit = np.flatnonzero((g_all >= 0).any(axis=1))
+        if hit.size == 0:
+            return None
+        i = hit[0]
+        return (float(t_all[i - 1]) if i > 0 else t_start, float(t_all[i]))
 
     def locate(self, dense: Any, a: float, b: float) -> float:
         """Earliest crossing in ``[a, b]`` (some g(b) >= 0), returned where ``g >= 0``."""

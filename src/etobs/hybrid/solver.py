@@ -375,7 +375,7 @@ class _FastSolver:
             ths = thetas[:, : S - 1].ravel()
             gs = self.guard(t0[rows] + ths * h[rows], at(rows, ths)).reshape(C, S - 1, m)
             gall[:, : S - 1] = gs
-            probe = _peak_probe(np.concatenate([g0[cand][:, None], gs, g1[cand][:, None]], axis=1))
+            probe = peak_probe(np.concatenate([g0[cand][:, None], gs, g1[cand][:, None]], axis=1))
             pr = np.flatnonzero(np.isfinite(probe))
             if pr.size:
                 r = cand[pr]
@@ -435,7 +435,7 @@ def _peak_value(seq: np.ndarray) -> np.ndarray:
     return peak.max(axis=1) if peak.shape[1] else np.full((seq.shape[0], seq.shape[2]), -np.inf)
 
 
-def _peak_probe(seq: np.ndarray) -> np.ndarray:
+def peak_probe(seq: np.ndarray) -> np.ndarray:
     """Earliest θ per row where a parabola predicts the event function reaches zero.
 
     At every interior local maximum that is still negative, the parabola through it and

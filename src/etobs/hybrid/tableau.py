@@ -23,10 +23,21 @@ Flow = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def _combine(w: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """``sum_k w[k] * K[k]`` for stage arrays ``K`` (k, M, n), as one matrix product."""
-    k = w.shape[-1]
-    flat = K[:k].reshape(k, -1)
-    return np.dot(w, flat).reshape(*w.shape[:-1], *K.shape[1:])
+    """``sum_k w[k] * K[k]`` for stage arrays ``K`` (k, M, n); ``w`` may be 2-D (rows).
+
+    Elementwise multiply-adds in a fixed order, skipping zero weights: unlike a BLAS
+    product, the result of each run is then bit-for-bit independent of the batch size
+    and of the other runs in the batch.
+    """
+    if w.ndim == 2:
+        return np.stack([_combine(row, K) for row in w])
+    nz = np.flatnonzero(w)
+    if nz.size == 0:
+        return np.zeros(K.shape[1:])
+    acc = w[nz[0]] * K[nz[0]]
+    for k in nz[1:]:
+        acc += w[k] * K[k]
+    return acc
 
 
 @dataclass(frozen=True)
