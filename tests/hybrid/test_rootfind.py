@@ -32,7 +32,8 @@ def test_root_at_the_right_end_closes_at_once():
     def fun(rows, x):
         return x - 1.0
 
-    a, b = bracket_root(fun, np.array([0.0]), np.array([1.0]), np.array([-1.0]), np.array([0.0]),
-                        np.array([1e-12]))
+    a, b = bracket_root(
+        fun, np.array([0.0]), np.array([1.0]), np.array([-1.0]), np.array([0.0]), np.array([1e-12])
+    )
     assert b[0] == 1.0
     assert 1.0 - a[0] <= 1e-12

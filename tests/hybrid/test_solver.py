@@ -56,8 +56,9 @@ def test_a_short_excursion_inside_one_step_is_not_missed(solver):
     # only 0.09 s around each peak. A sign test at step ends alone misses every event
     # (event_samples=1); the sampled guard with the parabolic peak probe finds them.
     loose = {"rtol": 1e-3, "atol": 1e-3}
-    sign_only = solver(grazing_oscillator(), [0.0, 1.0], (0.0, 20.0),
-                       options=SolverOptions(event_samples=1, **loose))
+    sign_only = solver(
+        grazing_oscillator(), [0.0, 1.0], (0.0, 20.0), options=SolverOptions(event_samples=1, **loose)
+    )
     guarded = solver(grazing_oscillator(), [0.0, 1.0], (0.0, 20.0), options=SolverOptions(**loose))
     tight = solve(grazing_oscillator(), [0.0, 1.0], (0.0, 20.0))
     if solver is solve:
@@ -90,8 +91,13 @@ def test_max_jumps_stops_a_zeno_run_and_not_the_others():
 
 def test_finite_escape_is_reported_per_run():
     # x' = x^2 escapes at t = 1/x0: run 0 (x0 = 1) blows up before t = 2, run 1 does not.
-    system = HybridSystem(n=1, n_rules=0, flow=lambda t, x: x * x,
-                          guard=lambda t, x: np.empty((x.shape[0], 0)), jump=lambda k, t, x: x)
+    system = HybridSystem(
+        n=1,
+        n_rules=0,
+        flow=lambda t, x: x * x,
+        guard=lambda t, x: np.empty((x.shape[0], 0)),
+        jump=lambda k, t, x: x,
+    )
     sol = solve(system, [[1.0], [-1.0]], (0.0, 2.0))
     assert sol.status[0] in (Status.NONFINITE, Status.STEP_UNDERFLOW)
     assert sol.t_final[0] < 1.0 + 1e-6
@@ -125,8 +131,13 @@ def test_initial_state_in_the_jump_set_jumps_at_t0():
 
 
 def test_model_function_with_wrong_shape_is_named():
-    bad = HybridSystem(n=2, n_rules=1, flow=lambda t, x: x[:, :1], guard=lambda t, x: -np.ones((len(t), 1)),
-                       jump=lambda k, t, x: x)
+    bad = HybridSystem(
+        n=2,
+        n_rules=1,
+        flow=lambda t, x: x[:, :1],
+        guard=lambda t, x: -np.ones((len(t), 1)),
+        jump=lambda k, t, x: x,
+    )
     with pytest.raises(ModelError, match=r"`flow` returned an array of shape \(1, 1\); expected \(1, 2\)"):
         solve(bad, [0.0, 0.0], (0.0, 1.0))
 

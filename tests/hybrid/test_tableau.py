@@ -66,6 +66,7 @@ def test_hermite_interpolates_ends_and_is_cubic():
     np.testing.assert_allclose(out[:, 0], y0)
     np.testing.assert_allclose(out[:, 1], y1)
     # exact for a cubic polynomial p(t) = t^3 on [0, 2]
-    p = hermite(np.array([[0.0]]), np.array([[0.0]]), np.array([[8.0]]), np.array([[12.0]]), h,
-                np.array([0.25, 0.5]))
+    p = hermite(
+        np.array([[0.0]]), np.array([[0.0]]), np.array([[8.0]]), np.array([[12.0]]), h, np.array([0.25, 0.5])
+    )
     np.testing.assert_allclose(p[0, :, 0], [0.125, 1.0])

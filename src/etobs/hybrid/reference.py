@@ -24,7 +24,7 @@ from etobs.errors import InputError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import HybridSolution
-from etobs.hybrid.solver import peak_probe, check_span
+from etobs.hybrid.solver import check_span, peak_probe
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import HybridSystem
 

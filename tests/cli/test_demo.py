@@ -1,0 +1,67 @@
+import json
+
+import pytest
+
+from etobs.cli.main import main
+
+
+def test_demo_writes_figures_and_summary(tmp_path, capsys):
+    out = tmp_path / "ra"
+    code = main(["demo", "robot-arm", "--out", str(out), "--t-end", "3", "--window", "1,3"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("transmissions", "min_inter_event_time", "max_error_window", "status", "t_end", "x0"):
+        assert key in summary
+    assert summary["status"] == "completed"
+    assert summary["t_end"] == 3.0 and summary["x0"] == [3.0, 2.0, 3.0, -2.0]
+    assert len(summary["transmissions"]) == 2 and sum(summary["transmissions"]) > 0
+    assert summary["max_error_window"] > 0
+    for name in ("states.png", "error.png", "inter_event_times.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    printed = capsys.readouterr().out
+    assert "min inter-event time" in printed and "paper" in printed
+
+
+def test_demo_options(tmp_path):
+    out = tmp_path / "ra"
+    code = main(
+        [
+            "demo",
+            "robot-arm",
+            "--out",
+            str(out),
+            "--t-end",
+            "1",
+            "--x0",
+            "1,0,1,0",
+            "--no-noise",
+            "--no-disturbance",
+            "--no-plots",
+        ]
+    )
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["x0"] == [1.0, 0.0, 1.0, 0.0]
+    assert summary["noise"] is False and summary["disturbance"] is False
+    assert summary["max_error_window"] is None  # the window [20, 30] lies past t_end
+    assert not (out / "states.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--x0", "3,2"], r"--x0 must be 4 comma-separated finite numbers \(e.g. 3,2,3,-2\); got '3,2'"),
+        (["--x0", "3,2,nan,1"], r"--x0 must be 4 comma-separated finite numbers"),
+        (["--window", "20"], r"--window must be 2 comma-separated finite numbers"),
+        (["--t-end", "-1"], r"--t-end must be a positive number of seconds; got -1.0"),
+        (["--backend", "rk4"], r"argument --backend: invalid choice: 'rk4'"),
+    ],
+)
+def test_demo_bad_arguments(argv, match, capsys, tmp_path):
+    with pytest.raises(SystemExit) as info:
+        main(["demo", "robot-arm", "--out", str(tmp_path), *argv])
+    err = capsys.readouterr().err + str(info.value.code)
+    assert info.value.code != 0
+    import re
+
+    assert re.search(match, err), err

@@ -1,0 +1,115 @@
+import numpy as np
+import pytest
+
+from etobs import (
+    DynamicRule,
+    EstimationProblem,
+    InputError,
+    InputTypeError,
+    Linear,
+    ModelError,
+    Node,
+    Observer,
+    Plant,
+    Quadratic,
+    SaveAt,
+    simulate,
+)
+from etobs.estimation import max_estimation_error, min_inter_event_time, transmission_counts
+from etobs.examples import robot_arm
+
+
+def rule():
+    return DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=1.0, c=0.1, b=1.0, eps=1.0, eta0=1.0)
+
+
+def plant(n_x=3, n_y=3, **kw):
+    return Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x[:, :n_y], n_x=n_x, n_y=n_y, **kw)
+
+
+def observer(n_z=3):
+    return Observer(f_o=lambda t, z, u, ybar, yhat: -z, n_z=n_z)
+
+
+def test_layout():
+    pb = EstimationProblem(plant(), observer(), [Node((0, 2), rule()), Node((1,), rule())])
+    lay = pb.layout
+    assert (lay.x, lay.z, lay.ybar) == (slice(0, 3), slice(3, 6), slice(6, 9))
+    assert lay.rule == (slice(9, 10), slice(10, 11))
+    assert lay.n == 11
+
+
+@pytest.mark.parametrize(
+    ("nodes", "match"),
+    [
+        ([Node((0, 1), rule()), Node((1, 2), rule())], r"output 1 is claimed by nodes \[0, 1\]"),
+        ([Node((0,), rule()), Node((1,), rule())], r"outputs \[2\] belong to no node"),
+        ([Node((0, 1, 2, 3), rule())], r"outputs \[3\] do not exist \(n_y = 3\)"),
+    ],
+)
+def test_nodes_must_partition_the_outputs(nodes, match):
+    with pytest.raises(InputError, match="must partition the outputs 0..2: " + match.split(": ")[-1]):
+        EstimationProblem(plant(), observer(), nodes)
+
+
+def test_shape_errors_name_the_function():
+    bad_f = Plant(f_p=lambda t, x, u, v: x[:, :2], h=lambda x: x, n_x=3, n_y=3)
+    with pytest.raises(
+        ModelError, match=r"`f_p` returned shape \(2, 2\) for a batch of 2 runs; expected \(2, n_x=3\)"
+    ):
+        EstimationProblem(bad_f, observer(), [Node((0, 1, 2), rule())])
+    bad_h = Plant(f_p=lambda t, x, u, v: x, h=lambda x: x[:, :1], n_x=3, n_y=3)
+    with pytest.raises(ModelError, match=r"`h` returned shape \(2, 1\) .* expected \(2, n_y=3\)"):
+        EstimationProblem(bad_h, observer(), [Node((0, 1, 2), rule())])
+    bad_o = Observer(f_o=lambda t, z, u, ybar, yhat: z[:, :1], n_z=3)
+    with pytest.raises(ModelError, match=r"`f_o` returned shape \(2, 1\) .* expected \(2, n_z=3\)"):
+        EstimationProblem(plant(), bad_o, [Node((0, 1, 2), rule())])
+
+
+def test_other_problem_errors():
+    with pytest.raises(InputError, match=r"observer `n_z` = 2 is smaller than the plant's n_x = 3"):
+        EstimationProblem(plant(), observer(2), [Node((0, 1, 2), rule())])
+    with pytest.raises(InputTypeError, match=r"`plant` must be a Plant; got dict"):
+        EstimationProblem({}, observer(), [Node((0,), rule())])  # type: ignore[arg-type]
+    with pytest.raises(InputTypeError, match=r"`nodes` must be a non-empty sequence of Node"):
+        EstimationProblem(plant(), observer(), [])
+    with pytest.raises(InputError, match=r"`m` has dimension 2; expected 3"):
+        EstimationProblem(plant(), observer(), [Node((0, 1, 2), rule())], m=[0.1, 0.1])
+    with pytest.raises(InputError, match=r"`n_x` must be an integer >= 1; got 0"):
+        plant(n_x=0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "match"),
+    [
+        ({"x0": [3, 2, np.inf, -2]}, InputError, r"`x0` must be finite; runs \[0\] are not"),
+        ({"x0": [3, 2, 3]}, InputError, r"`x0` has shape \(3,\); expected \(4,\) for one run or \(B, 4\)"),
+        (
+            {"x0": [[3, 2, 3, -2]] * 2, "z0": np.zeros((3, 4))},
+            InputError,
+            r"`z0` has 3 runs but x0 has 2; give one row or 2 rows",
+        ),
+        ({"t_end": -1.0}, InputError, r"`t_end` must be >= t0 = 0; got -1"),
+        ({"backend": "rk4"}, InputError, r"`backend` must be one of \('fast', 'scipy'\); got 'rk4'"),
+        ({"e0": [0.0]}, InputError, r"`e0` has shape \(1,\); expected \(2,\)"),
+    ],
+)
+def test_bad_simulate_arguments(kwargs, exc, match):
+    args = {"x0": [3, 2, 3, -2], "t_end": 0.1} | kwargs
+    x0, t_end = args.pop("x0"), args.pop("t_end")
+    with pytest.raises(exc, match=match):
+        simulate(robot_arm(), x0, t_end, **args)
+
+
+def test_metrics_errors_and_edge_cases():
+    res = simulate(robot_arm(), [3, 2, 3, -2], 0.5)
+    with pytest.raises(InputError, match=r"this result kept no grid: simulate with save=SaveAt\(grid=...\)"):
+        max_estimation_error(res, (0.0, 0.5))
+    with pytest.raises(InputError, match=r"`window` must satisfy t_start <= t_stop; got \(2, 1\)"):
+        transmission_counts(res, (2.0, 1.0))
+    assert np.isnan(min_inter_event_time(res)).all()  # no node transmits twice in 0.5 s
+    res = simulate(robot_arm(), [3, 2, 3, -2], 0.5, save=SaveAt(steps=False, grid=[0.0, 0.5]))
+    with pytest.raises(InputError, match=r"the save grid has no point in the window \[0.1, 0.2\]"):
+        max_estimation_error(res, (0.1, 0.2))
+    with pytest.raises(InputError, match=r"this result kept no arcs"):
+        res.arc(0)
