@@ -1,0 +1,35 @@
+# Two entry points for a fresh clone (see README): `make demo` and `make test`.
+# Each creates .venv on first use and (re)installs when pyproject.toml changes.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: demo test test-fast bench lint clean
+
+$(VENV)/.installed-%: pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[$*]'
+	@touch $@
+
+## demo: run the paper's robot-arm case study into robot-arm-out/
+demo: $(VENV)/.installed-plot
+	$(BIN)/etobs demo robot-arm --out robot-arm-out
+
+## test: lint, the whole test suite (slow tests included), the benchmarks in quick mode
+test: $(VENV)/.installed-test
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/python -m pytest --doctest-modules src tests
+	$(BIN)/python benchmarks/bench_robot_arm.py --quick
+
+## test-fast: the test suite without the tests marked slow
+test-fast: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -m "not slow" src tests --doctest-modules
+
+## bench: the benchmarks at full size
+bench: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/bench_robot_arm.py
+
+clean:
+	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,71 @@
+"""Benchmark: robot-arm runs with the fast batched solver against the scipy backend.
+
+Both solvers simulate the paper's robot arm (section 7) from the same random initial
+states; the figure that matters is the per-run time ratio, measured in one process on
+the same runs (these machines are shared and noisy, so absolute times vary).
+
+    python benchmarks/bench_robot_arm.py            # 100 fast runs, 3 scipy runs, 30 s
+    python benchmarks/bench_robot_arm.py --quick    # CI smoke: 10 fast, 1 scipy, 5 s
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from etobs import SaveAt, SolverOptions, simulate
+from etobs.estimation import transmission_counts
+from etobs.examples import random_initial_states, robot_arm
+
+
+def timed(fn):
+    start = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes for CI")
+    parser.add_argument("--runs", type=int, default=None, help="fast-solver runs (default 100)")
+    parser.add_argument("--ref-runs", type=int, default=None, help="scipy-backend runs (default 3)")
+    parser.add_argument("--t-end", type=float, default=None, help="horizon (default 30 s)")
+    args = parser.parse_args()
+    runs = args.runs or (10 if args.quick else 100)
+    ref_runs = args.ref_runs or (1 if args.quick else 3)
+    t_end = args.t_end or (5.0 if args.quick else 30.0)
+
+    pb = robot_arm()
+    x0 = random_initial_states(runs, seed=1)
+    opts = SolverOptions()  # rtol = atol = 1e-10, the defaults
+    save = SaveAt(steps=False)
+    fast, t_fast = timed(lambda: simulate(pb, x0, t_end, options=opts, save=save))
+    sub, t_fast_sub = timed(lambda: simulate(pb, x0[:ref_runs], t_end, options=opts, save=save))
+    ref, t_ref = timed(lambda: simulate(pb, x0[:ref_runs], t_end, options=opts, save=save, backend="scipy"))
+
+    same = np.array_equal(transmission_counts(sub), transmission_counts(ref))
+    worst = np.max(np.abs(sub.transmissions.t - ref.transmissions.t)) if same else float("nan")
+    print(f"robot arm, horizon {t_end:g} s, rtol = atol = {opts.rtol:g}")
+    print(f"fast solver, {runs} runs in one batch: {t_fast:8.2f} s total, {t_fast / runs * 1e3:8.1f} ms/run")
+    print(
+        f"fast solver, {ref_runs} runs in one batch:  {t_fast_sub:8.2f} s total, "
+        f"{t_fast_sub / ref_runs * 1e3:8.1f} ms/run"
+    )
+    print(
+        f"scipy backend, {ref_runs} runs:              {t_ref:8.2f} s total, {t_ref / ref_runs * 1e3:8.1f} ms/run"
+    )
+    print(
+        f"ratio scipy/fast per run: {t_ref / ref_runs / (t_fast / runs):.1f}x "
+        f"(batch of {runs}), {t_ref / t_fast_sub:.1f}x (same {ref_runs} runs)"
+    )
+    print(
+        f"transmissions: mean {transmission_counts(fast).sum(1).mean():.1f} per run; "
+        f"scipy and fast agree on the shared runs: {same}, max event-time gap {worst:.2e} s"
+    )
+    print(f"statuses: {sorted(set(fast.status_labels()))}")
+
+
+if __name__ == "__main__":
+    main()
