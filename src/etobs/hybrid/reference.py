@@ -19,12 +19,10 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from etobs import _validate as v
-from etobs.errors import InputError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import HybridSolution
-from etobs.hybrid.solver import check_span, peak_probe
+from etobs.hybrid.solver import check_inputs, peak_probe
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import HybridSystem
 
@@ -46,10 +44,7 @@ def solve_reference(
 
     ``options.method`` is ignored (``solve_ivp``'s ``DOP853`` is always used).
     """
-    if not isinstance(system, HybridSystem):
-        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
-    t0, t_end = check_span(t_span)
-    X = v.batch("x0", x0, system.n)
+    X, t0, t_end = check_inputs(system, x0, t_span)
     opts = options or SolverOptions()
     save = save or SaveAt()
     B = X.shape[0]

@@ -40,8 +40,10 @@ MIN_FACTOR = 0.2  # never shrink a step by more than 5x at once
 MAX_FACTOR = 10.0  # never grow a step by more than 10x at once
 
 
-def check_span(t_span: Any) -> tuple[float, float]:
-    """Validate ``t_span = (t0, t_end)`` with ``t0 <= t_end``."""
+def check_inputs(system: Any, x0: Any, t_span: Any) -> tuple[np.ndarray, float, float]:
+    """Validate the arguments shared by both backends; return ``(x0 (B, n), t0, t_end)``."""
+    if not isinstance(system, HybridSystem):
+        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
     try:
         t0, t_end = t_span
     except (TypeError, ValueError) as exc:
@@ -50,7 +52,7 @@ def check_span(t_span: Any) -> tuple[float, float]:
     t_end = v.real("t_span[1]", t_end)
     if t_end < t0:
         raise InputError(f"`t_span` must satisfy t0 <= t_end; got ({t0:g}, {t_end:g})")
-    return t0, t_end
+    return v.batch("x0", x0, system.n), t0, t_end
 
 
 def solve(
@@ -95,10 +97,7 @@ def solve(
     0.451524
 
     """
-    if not isinstance(system, HybridSystem):
-        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
-    t0, t_end = check_span(t_span)
-    x = v.batch("x0", x0, system.n)
+    x, t0, t_end = check_inputs(system, x0, t_span)
     return _FastSolver(system, x, t0, t_end, options or SolverOptions(), save or SaveAt()).run()
 
 
