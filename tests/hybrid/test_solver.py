@@ -183,3 +183,78 @@ def test_unknown_keyword_is_a_type_error():
         SolverOptions(rtl=1e-6)  # type: ignore[call-arg]
     with pytest.raises(TypeError):
         solve(two_clocks(1, 1), [0, 0], (0, 1), tolerance=1e-3)  # type: ignore[call-arg]
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_first_step_survives_a_non_finite_trial_point(solver):
+    # The flow is finite at x0 but NaN past x = 1, where the automatic first step's
+    # trial Euler point lands; the run must still complete (it used to stall at t0).
+    for bad in (np.nan, np.inf):
+        system = HybridSystem(
+            n=1,
+            n_rules=0,
+            flow=lambda t, x, bad=bad: np.where(x > 1, bad, 1 - x),
+            guard=lambda t, x: np.empty((x.shape[0], 0)),
+            jump=lambda k, t, x: x,
+        )
+        sol = solver(system, [0.9999], (0.0, 10.0), options=SolverOptions(max_steps=5000))
+        assert sol.status.tolist() == [Status.COMPLETED]
+        assert sol.x_final[0, 0] == pytest.approx(1 - 1e-4 * np.exp(-10.0), abs=1e-9)
+
+
+def state_sensitive_system():
+    """Unit rotation with g = K (r^2 - 1) + psi(t) - 10 c (c counts jumps).
+
+    On the exact orbit r = 1, so g = psi(t) >= 0 for 0.30 s around t = 0.35. K is large
+    so that a cubic Hermite interpolant's error over a 1 s step (which bends r^2 - 1 by
+    about -1/K) hides the excursion; the method's own dense output does not.
+    """
+    K = 195.48248109138532
+
+    def guard(t, x):
+        psi = 0.26 - 1.26 * np.sin(np.pi * ((t % 1.0) - 0.5)) ** 2
+        return (K * ((x[:, :2] ** 2).sum(1) - 1) + psi - 10 * x[:, 2])[:, None]
+
+    def jump(k, t, x):
+        out = x.copy()
+        out[:, 2] += 1
+        return out
+
+    return HybridSystem(
+        n=3,
+        n_rules=1,
+        guard=guard,
+        jump=jump,
+        flow=lambda t, x: np.stack([-x[:, 1], x[:, 0], 0 * x[:, 0]], 1),
+    )
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_long_excursion_of_a_state_sensitive_event_function_is_found(solver):
+    opts = SolverOptions(first_step=1.0, max_step=1.0, rtol=1e-6, atol=1e-6)
+    sol = solver(state_sensitive_system(), [1.0, 0.0, 0.0], (0.0, 3.0), options=opts)
+    # psi(t) = 0 first at t = 0.5 - arcsin(sqrt(0.26/1.26))/pi
+    expected = 0.5 - np.arcsin(np.sqrt(0.26 / 1.26)) / np.pi
+    assert sol.jumps.t.tolist() == pytest.approx([expected], abs=2e-4)
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_failure_reports_where_the_run_stopped(solver):
+    # x' = x^2 escapes at t = 1; a clock rule jumps at t = 0.5 (the reference backend
+    # used to report the start of its last segment instead of the escape point).
+    system = HybridSystem(
+        n=2,
+        n_rules=1,
+        flow=lambda t, x: np.stack([x[:, 0] ** 2, np.ones(x.shape[0])], 1),
+        guard=lambda t, x: (x[:, 1] - 0.5)[:, None],
+        jump=lambda k, t, x: x * [1, 0] - [0, 10],
+    )
+    sol = solver(system, [1.0, 0.0], (0.0, 2.0))
+    assert sol.status[0] in (Status.STEP_UNDERFLOW, Status.NONFINITE)
+    assert sol.t_final[0] == pytest.approx(1.0, abs=1e-6)
+    assert sol.x_final[0, 0] > 1e6
+
+
+def test_reference_max_steps():
+    sol = solve_reference(two_clocks(0.1, 0.07), [0.0, 0.0], (0.0, 5.0), options=SolverOptions(max_steps=10))
+    assert sol.status.tolist() == [Status.MAX_STEPS]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from etobs.hybrid.tableau import TABLEAUS, hermite
+from etobs.hybrid.tableau import TABLEAUS
 
 
 def rotation(t, y):
@@ -56,17 +56,3 @@ def test_dense_output_matches_step_ends(name):
     Q = tab.dense(rotation, t0, y0, y1, K, np.array([0.3]))
     np.testing.assert_allclose(tab.evaluate(Q, y0, np.array([0.0])), y0, atol=1e-15)
     np.testing.assert_allclose(tab.evaluate(Q, y0, np.array([1.0])), y1, atol=1e-14)
-
-
-def test_hermite_interpolates_ends_and_is_cubic():
-    y0, y1 = np.array([[1.0, 2.0]]), np.array([[3.0, -1.0]])
-    f0, f1 = np.array([[0.5, 0.0]]), np.array([[-1.0, 2.0]])
-    h = np.array([2.0])
-    out = hermite(y0, f0, y1, f1, h, np.array([0.0, 1.0]))
-    np.testing.assert_allclose(out[:, 0], y0)
-    np.testing.assert_allclose(out[:, 1], y1)
-    # exact for a cubic polynomial p(t) = t^3 on [0, 2]
-    p = hermite(
-        np.array([[0.0]]), np.array([[0.0]]), np.array([[8.0]]), np.array([[12.0]]), h, np.array([0.25, 0.5])
-    )
-    np.testing.assert_allclose(p[0, :, 0], [0.125, 1.0])

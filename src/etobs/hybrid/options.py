@@ -79,7 +79,8 @@ class SaveAt:
         hybrid arc). Memory grows with the number of steps; turn off for big batches.
     grid : array_like or None
         Increasing times at which to keep the state (from the dense output). At a jump
-        time the value before the jump (smallest ``j``) is kept.
+        time the value before the jump (smallest ``j``) is kept. Points outside the
+        horizon, or after a run stopped early, hold NaN with ``j = -1``.
 
     """
 

@@ -42,7 +42,8 @@ def solve_reference(
 ) -> HybridSolution:
     """Solve each run with ``solve_ivp``; same arguments and result as :func:`~etobs.hybrid.solve`.
 
-    ``options.method`` is ignored (``solve_ivp``'s ``DOP853`` is always used).
+    ``options.method`` is ignored (``solve_ivp``'s ``DOP853`` is always used) and
+    ``max_steps`` is checked between flow segments only.
     """
     X, t0, t_end = check_inputs(system, x0, t_span)
     opts = options or SolverOptions()
@@ -142,6 +143,7 @@ class _Run:
             ev.terminal = True  # type: ignore[attr-defined]
             ev.direction = 1.0  # type: ignore[attr-defined]
             events.append(ev)
+        first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
         sol = solve_ivp(
             fun,
             (self.t, self.t_end),
@@ -152,10 +154,15 @@ class _Run:
             max_step=o.max_step,
             events=events or None,
             dense_output=True,
+            **first,
         )
-        if sol.status == -1:
-            return Status.NONFINITE if not np.all(np.isfinite(sol.y[:, -1])) else Status.STEP_UNDERFLOW
         self.n_steps += sol.t.size - 1
+        if sol.status == -1:
+            # Report where the integration actually stopped, like the fast solver.
+            self.t, self.x = float(sol.t[-1]), np.asarray(sol.y[:, -1], dtype=float)
+            self.keep(self.t, self.x)
+            finite = np.all(np.isfinite(self.x)) and np.all(np.isfinite(fun(self.t, self.x)))
+            return Status.STEP_UNDERFLOW if finite else Status.NONFINITE
         dense = sol.sol
         t_stop, bracket = float(sol.t[-1]), None
         if sol.status == 1:
@@ -182,7 +189,10 @@ class _Run:
         if bracket is None:
             self.t = self.t_end
             return Status.RUNNING
-        return self.jumps()
+        status = self.jumps()
+        if status is Status.RUNNING and self.n_steps >= o.max_steps and self.t < self.t_end:
+            return Status.MAX_STEPS
+        return status
 
     def scan(self, dense: Any, t_start: float) -> tuple[float, float] | None:
         """First sampled crossing on the steps of ``dense``, as a bracket, or None."""
@@ -220,7 +230,7 @@ class _Run:
             )
             best = min(best, r)
         for _ in range(_NUDGES):
-            if np.any(self.g(best, dense(best)) >= 0):
+            if np.any(self.g(best, dense(best)) >= 0) or best >= self.t_end:
                 break
-            best += self.opts.event_xtol / 4
+            best = min(best + self.opts.event_xtol / 4, self.t_end)
         return best

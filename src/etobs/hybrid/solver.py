@@ -5,9 +5,10 @@ Solver contract (what :func:`solve` guarantees for every run of the batch):
 1. Along flows the state follows ``flow`` with an embedded Runge--Kutta pair
    (``SolverOptions.method``) under local error control (``rtol``, ``atol``).
 2. Every event function is evaluated at the start, at ``event_samples - 1`` interior
-   points and at the end of every accepted step (first on a cheap cubic Hermite
-   interpolant, then, where it signals a crossing, on the method's own dense output),
-   so an excursion above zero longer than ``step / event_samples`` is never missed.
+   points (on the method's own dense output) and at the end of every accepted step, so
+   an excursion above zero longer than ``step / event_samples`` is never missed; at
+   each negative interior local maximum of those samples a parabola predicts the peak,
+   and a predicted peak ``>= 0`` is probed too (catching most shorter excursions).
 3. The first crossing is located by bracketing root finding on the dense output to a
    bracket of width ``event_xtol`` in time; the event time reported is the right end,
    where the event function is ``>= 0``, and the state there comes from the dense output.
@@ -32,7 +33,7 @@ from etobs.hybrid.rootfind import bracket_root
 from etobs.hybrid.solution import HybridSolution
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import HybridSystem
-from etobs.hybrid.tableau import TABLEAUS, hermite
+from etobs.hybrid.tableau import TABLEAUS
 
 # Step-size controller constants, as in Hairer, Nørsett & Wanner (1993), II.4.
 SAFETY = 0.9  # keep the next error estimate below the tolerance with margin
@@ -132,6 +133,7 @@ class _FastSolver:
         self.g = np.empty((b, self.m))
         self.f = np.zeros((b, n))
         self.h = np.zeros(b)
+        self.rejected = np.zeros(b, dtype=bool)
         self.rec = Recorder(b, n, save, t0)
 
     # -- user functions with shape checks ---------------------------------------------
@@ -156,11 +158,14 @@ class _FastSolver:
                 self.h[live] = self.opts.first_step
             else:
                 self.h[live] = self._initial_step(live)
-        while True:
-            act = np.flatnonzero(self.status == Status.RUNNING)
-            if act.size == 0:
-                break
-            self._advance(act)
+        # Overflow and invalid operations are expected here: a run whose state becomes
+        # non-finite is stopped with status ``nonfinite``, so numpy need not warn.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            while True:
+                act = np.flatnonzero(self.status == Status.RUNNING)
+                if act.size == 0:
+                    break
+                self._advance(act)
         return HybridSolution(
             t_span=(self.t0, self.t_end),
             status=self.status.copy(),
@@ -181,11 +186,11 @@ class _FastSolver:
         if runs.size == 0:
             return
         f = self.flow(self.t[runs], self.x[runs])
-        bad = ~np.all(np.isfinite(f), axis=1)
+        done = self.t[runs] >= self.t_end
+        bad = ~np.all(np.isfinite(f), axis=1) & ~done
         self.status[runs[bad]] = Status.NONFINITE
+        self.status[runs[done]] = Status.COMPLETED
         self.f[runs] = f
-        done = runs[~bad & (self.t[runs] >= self.t_end)]
-        self.status[done] = Status.COMPLETED
 
     def _initial_step(self, runs: np.ndarray) -> np.ndarray:
         """Hairer, Nørsett & Wanner (1993), II.4: a first step from two flow evaluations."""
@@ -207,7 +212,10 @@ class _FastSolver:
                 np.maximum(1e-6, h0 * 1e-3),
                 (0.01 / big) ** (1.0 / (self.tab.error_order + 1)),
             )
-        return np.minimum(np.minimum(100 * h0, h1), o.max_step)
+        h = np.minimum(np.minimum(100 * h0, h1), o.max_step)
+        # A trial point where the flow is not finite gives a NaN or zero estimate:
+        # fall back to the first guess, whose step control then takes over.
+        return np.where(np.isfinite(h) & (h > 0), h, np.minimum(h0, o.max_step))
 
     # -- jumps ------------------------------------------------------------------------
     def _jump_until_flow(self, runs: np.ndarray) -> None:
@@ -254,12 +262,14 @@ class _FastSolver:
             factor = np.clip(SAFETY * err**self.err_exp, MIN_FACTOR, MAX_FACTOR)
         factor = np.where(err == 0.0, MAX_FACTOR, factor)
         factor = np.where(finite, factor, MIN_FACTOR)
-        factor = np.where(accept, factor, np.minimum(factor, 1.0))
+        # After a rejection, the next accepted step may not grow (Hairer et al., II.4).
+        factor = np.where(~accept | self.rejected[act], np.minimum(factor, 1.0), factor)
+        self.rejected[act] = ~accept
         h_next = h * factor
         self.n_steps[act[accept]] += 1
         self.n_rejected[act[~accept]] += 1
         # A rejected step that can no longer shrink ends its run.
-        tiny = ~accept & (h_next <= 4.0 * np.spacing(np.maximum(np.abs(t), 1.0)))
+        tiny = ~accept & ~(h_next > 4.0 * np.spacing(np.maximum(np.abs(t), 1.0)))
         self.status[act[tiny & finite]] = Status.STEP_UNDERFLOW
         self.status[act[tiny & ~finite]] = Status.NONFINITE
         self.h[act] = np.where(last & accept, np.maximum(self.h[act], h_next), h_next)
@@ -281,54 +291,26 @@ class _FastSolver:
         K: np.ndarray,
         x1: np.ndarray,
     ) -> None:
-        tab, o, m, n = self.tab, self.opts, self.m, self.n
+        tab, m = self.tab, self.m
         M = runs.size
         f1 = K[-1]
         t1 = np.where(last, self.t_end, t0 + h)
         g0 = self.g[runs]
         g1 = self.guard(t1, x1)
-        S = o.event_samples
-        hit = (g1 >= 0).any(axis=1)
-        if m and S > 1:
-            # First look on the cubic Hermite interpolant (no extra flow evaluations).
-            # Its error can hide a short excursion near a smooth maximum, so a step whose
-            # samples or predicted peak come within a quarter of the step's range of
-            # zero is screened again on the accurate dense output (``_locate``).
-            th = np.arange(1, S) / S
-            xs = hermite(x0, f0, x1, f1, h, th)
-            ts = t0[:, None] + h[:, None] * th[None, :]
-            gs = self.guard(ts.ravel(), xs.reshape(-1, n)).reshape(M, S - 1, m)
-            seq = np.concatenate([g0[:, None], gs, g1[:, None]], axis=1)
-            top = np.maximum(seq.max(axis=1), _peak_value(seq))
-            margin = 0.25 * (seq.max(axis=1) - seq.min(axis=1))
-            hit |= (top >= -margin).any(axis=1)
-        cand = np.flatnonzero(hit)
-
-        # Runs with grid points in the step need the dense output too.
-        g_start = self.rec.grid_next[runs] if self.rec.grid_t is not None else None
-        need = np.zeros(M, dtype=bool)
-        need[cand] = True
-        if g_start is not None:
-            stop = np.searchsorted(self.rec.grid_t, t1, "right")
-            need |= stop > g_start
-        dense_rows = np.flatnonzero(need)
-        pos = np.full(M, -1)
-        pos[dense_rows] = np.arange(dense_rows.size)
-        Q = None
-        if dense_rows.size:
-            Q = tab.dense(
-                self.flow, t0[dense_rows], x0[dense_rows], x1[dense_rows], K[:, dense_rows], h[dense_rows]
-            )
+        # Every accepted step is screened on the method's dense output; a cheaper
+        # interpolant (cubic Hermite) can hide a long excursion when the event
+        # function is sensitive to the state, so it is not used here.
+        Q = tab.dense(self.flow, t0, x0, x1, K, h) if (m or self.rec.grid_t is not None) else None
 
         def at(rows: np.ndarray, th: np.ndarray) -> np.ndarray:
             """Dense-output state of step rows ``rows`` at ``θ = th``."""
-            assert Q is not None
-            p = pos[rows]
-            return tab.evaluate(Q[:, p], x0[rows], th)
+            if Q is None:  # pragma: no cover - only reached when Q was built
+                raise RuntimeError("dense output requested but not built")
+            return tab.evaluate(Q[:, rows], x0[rows], th)
 
         theta_ev = np.full(M, np.nan)
-        if cand.size:
-            theta_ev[cand] = self._locate(cand, at, t0, h, g0, g1)
+        if m:
+            theta_ev[:] = self._locate(np.arange(M), at, t0, h, g0, g1)
         ev = np.flatnonzero(np.isfinite(theta_ev))
         t_stop = t1.copy()
         x_stop = x1.copy()
@@ -402,9 +384,9 @@ class _FastSolver:
             r = rows[sel]
             return self.guard(t0[r] + th * h[r], at(r, th))[np.arange(sel.size), rule[sel]]
 
-        _, hi = bracket_root(
-            fun, lo_all[pr], hi_all[pr], g_left[pr, rule], g_right[pr, rule], self.opts.event_xtol / h[rows]
-        )
+        # θ-tolerance floored at the float resolution of θ (very long steps).
+        xtol = np.maximum(self.opts.event_xtol / h[rows], 4 * np.finfo(float).eps)
+        _, hi = bracket_root(fun, lo_all[pr], hi_all[pr], g_left[pr, rule], g_right[pr, rule], xtol)
         best = np.full(C, np.inf)
         np.minimum.at(best, c_idx[pr], hi)
         out[c_idx] = best[c_idx]

@@ -147,23 +147,6 @@ class Tableau:
         return y + acc
 
 
-def hermite(
-    y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, h: np.ndarray, theta: np.ndarray
-) -> np.ndarray:
-    """Cubic Hermite interpolant on each step, a cheap first look between step ends.
-
-    ``y0, f0, y1, f1`` have shape ``(M, n)``, ``h`` ``(M,)`` and ``theta`` ``(S,)``
-    (shared) or ``(M, S)`` (per row); returns ``(M, S, n)``.
-    """
-    hc = h[:, None, None]
-    d = (y1 - y0)[:, None, :]
-    a0 = y0[:, None, :]
-    hf0 = hc * f0[:, None, :]
-    hf1 = hc * f1[:, None, :]
-    th = theta[None, :, None] if theta.ndim == 1 else theta[:, :, None]
-    return a0 + th * (hf0 + th * ((3.0 * d - 2.0 * hf0 - hf1) + th * (hf0 + hf1 - 2.0 * d)))
-
-
 def _dopri5() -> Tableau:
     s = RK45.n_stages
     a = np.zeros((s, s))
