@@ -7,7 +7,8 @@ import sys
 from collections.abc import Sequence
 
 from etobs import __version__
-from etobs.cli import demo
+from etobs.cli import demo, sweep
+from etobs.errors import InputError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -18,13 +19,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"etobs {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo.add_parser(sub)
+    sweep.add_parsers(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: parse ``argv`` and run the chosen command."""
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except InputError as exc:  # bad input: one clear line, no traceback
+        parser.exit(2, f"etobs: error: {exc}\n")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,126 @@
+"""Where chunks run: in this process, in a local process pool, or on a Dask cluster.
+
+Every executor calls ``on_done(task, records)`` or ``on_error(task, message)`` in the
+driver for each task, so results are persisted by the driver as they arrive, whatever
+the executor.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import traceback
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from etobs.errors import InputError
+from etobs.experiments.runner import Task, run_task
+
+EXECUTORS = ("serial", "process", "dask")
+#: A process pool whose worker died is restarted this many times before the tasks
+#: still pending are recorded as failed.
+MAX_POOL_RESTARTS = 3
+
+Done = Callable[[Task, list[dict[str, Any]]], None]
+Failed = Callable[[Task, str], None]
+
+
+def execute(
+    tasks: Sequence[Task],
+    raw_spec: dict[str, Any],
+    on_done: Done,
+    on_error: Failed,
+    *,
+    executor: str = "process",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+) -> None:
+    """Run ``tasks`` with the chosen executor, reporting each one as it finishes."""
+    if executor not in EXECUTORS:
+        raise InputError(f"`executor` must be one of {EXECUTORS}; got {executor!r}")
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InputError(f"`workers` must be a positive integer; got {workers!r}")
+    if not tasks:
+        return
+    if executor == "serial":
+        _serial(tasks, raw_spec, on_done, on_error)
+    elif executor == "process":
+        _process(tasks, raw_spec, on_done, on_error, workers)
+    else:
+        _dask(tasks, raw_spec, on_done, on_error, scheduler, client)
+
+
+def _serial(tasks: Sequence[Task], raw: dict[str, Any], on_done: Done, on_error: Failed) -> None:
+    for task in tasks:
+        try:
+            records = run_task(raw, task)
+        except Exception:  # a failing chunk is recorded; the sweep goes on
+            on_error(task, traceback.format_exc())
+        else:
+            on_done(task, records)
+
+
+def _process(
+    tasks: Sequence[Task], raw: dict[str, Any], on_done: Done, on_error: Failed, workers: int | None
+) -> None:
+    # "spawn" starts clean workers: safe with threads, the same on every platform.
+    ctx = multiprocessing.get_context("spawn")
+    pending = list(tasks)
+    restarts = 0
+    while pending:
+        lost: list[Task] = []
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = {pool.submit(run_task, raw, t): t for t in pending}
+            for fut in as_completed(futures):
+                task = futures[fut]
+                try:
+                    records = fut.result()
+                except BrokenProcessPool:
+                    lost.append(task)
+                except Exception:
+                    on_error(task, traceback.format_exc())
+                else:
+                    on_done(task, records)
+        pending = lost
+        if pending:
+            restarts += 1
+            if restarts > MAX_POOL_RESTARTS:
+                for task in pending:
+                    on_error(task, f"a worker process died {restarts} times while this chunk was pending")
+                return
+
+
+def _dask(
+    tasks: Sequence[Task],
+    raw: dict[str, Any],
+    on_done: Done,
+    on_error: Failed,
+    scheduler: str | None,
+    client: Any,
+) -> None:
+    try:
+        from dask.distributed import Client
+        from dask.distributed import as_completed as dask_completed
+    except ImportError as exc:
+        raise InputError("the dask executor needs the `dask` extra: pip install 'etobs[dask]'") from exc
+    own = client is None
+    if own:
+        if not scheduler:
+            raise InputError(
+                "the dask executor needs `scheduler` (an address such as tcp://host:8786) or a client"
+            )
+        client = Client(scheduler)
+    try:
+        futures = [client.submit(run_task, raw, t, pure=False) for t in tasks]
+        index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
+        for fut in dask_completed(futures):
+            task = index[fut.key]
+            if fut.status == "error":
+                on_error(task, "".join(traceback.format_exception(fut.exception())))
+            else:
+                on_done(task, fut.result())
+    finally:
+        if own:
+            client.close()

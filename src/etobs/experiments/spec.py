@@ -1,0 +1,295 @@
+"""Sweep specifications: a validated, frozen description of a Monte-Carlo sweep.
+
+A spec is data, usually a TOML file (see ``examples/table1.toml``)::
+
+    name = "table1"
+    [system]
+    factory = "robot_arm"          # a registered example or "package.module:function"
+    fixed = { c = [0.001, 0.001] } # keyword arguments given to every row
+    [[rows]]                       # one table per parameter row (or a [grid])
+    sigma = [600, 800]
+    [[scenarios]]                  # each row runs under every scenario
+    name = "with_v_m"
+    noise = true
+    [initial_states]               # uniform in a box, seeded
+    low = [0, 0, 0, 0]
+    high = [20, 10, 20, 10]
+    runs = 100
+    seed = 2023
+    [horizon]
+    t_end = 30.0
+    [metrics]
+    transmissions_window = [0.0, 30.0]
+    error_window = [20.0, 30.0]
+    error_grid_step = 0.001
+    [solver]                       # any SolverOptions field
+    rtol = 1e-10
+
+Every key is checked: unknown keys are rejected and a wrong value names its key.
+"""
+
+from __future__ import annotations
+
+import itertools
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from etobs.errors import InputError
+from etobs.hybrid.options import SolverOptions
+
+_SOLVER_KEYS = {
+    "method",
+    "rtol",
+    "atol",
+    "max_step",
+    "first_step",
+    "max_jumps",
+    "max_steps",
+    "event_samples",
+    "event_xtol",
+}
+
+
+class SpecError(InputError):
+    """A sweep spec is invalid; the message names the offending key."""
+
+
+def _keys(where: str, table: Any, required: set[str], optional: set[str]) -> dict[str, Any]:
+    if not isinstance(table, dict):
+        raise SpecError(f"`{where}` must be a table; got {type(table).__name__}")
+    unknown = sorted(set(table) - required - optional)
+    if unknown:
+        allowed = ", ".join(sorted(required | optional))
+        raise SpecError(f"unknown key `{where}.{unknown[0]}`; allowed keys of `{where}`: {allowed}")
+    missing = sorted(required - set(table))
+    if missing:
+        raise SpecError(f"missing key `{where}.{missing[0]}`")
+    return table
+
+
+def _number(
+    key: str, value: Any, *, lower: float | None = None, integer: bool = False, strict: bool = False
+) -> float:
+    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if isinstance(value, bool) or not ok:
+        kind = "an integer" if integer else "a number"
+        raise SpecError(f"`{key}` must be {kind}; got {value!r}")
+    if not np.isfinite(value):
+        raise SpecError(f"`{key}` must be finite; got {value!r}")
+    if lower is not None and (value < lower or (strict and value == lower)):
+        raise SpecError(f"`{key}` must be {'>' if strict else '>='} {lower:g}; got {value!r}")
+    return value
+
+
+def _pair(key: str, value: Any) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise SpecError(f"`{key}` must be a pair [start, stop]; got {value!r}")
+    lo, hi = (_number(f"{key}[{i}]", v) for i, v in enumerate(value))
+    if hi < lo:
+        raise SpecError(f"`{key}` must satisfy start <= stop; got {value!r}")
+    return float(lo), float(hi)
+
+
+def _name(key: str, value: Any) -> str:
+    if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
+        raise SpecError(f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class InitialStates:
+    """Plant initial states drawn uniformly in the box ``[low, high]`` with ``seed``."""
+
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    runs: int
+    seed: int
+
+    def draw(self) -> np.ndarray:
+        """All ``runs`` initial states, shape ``(runs, n_x)``; the same for every row and scenario."""
+        rng = np.random.default_rng(self.seed)
+        lo, hi = np.array(self.low), np.array(self.high)
+        return lo + rng.uniform(0.0, 1.0, size=(self.runs, lo.size)) * (hi - lo)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Windows of the per-run metrics and the grid spacing of the error metric."""
+
+    transmissions_window: tuple[float, float]
+    error_window: tuple[float, float]
+    error_grid_step: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named set of keyword arguments added to every row (e.g. with or without noise)."""
+
+    name: str
+    params: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep; build it with :func:`load_spec` or :func:`parse_spec`."""
+
+    name: str
+    factory: str
+    fixed: dict[str, Any]
+    rows: tuple[dict[str, Any], ...]
+    scenarios: tuple[Scenario, ...]
+    initial_states: InitialStates
+    t_end: float
+    metrics: Metrics
+    solver: dict[str, Any]
+    raw: dict[str, Any] = field(repr=False, compare=False)
+
+    @property
+    def options(self) -> SolverOptions:
+        """The solver settings as :class:`SolverOptions`."""
+        return SolverOptions(**self.solver)
+
+    @property
+    def n_runs(self) -> int:
+        """Total number of runs: rows x scenarios x initial states."""
+        return len(self.rows) * len(self.scenarios) * self.initial_states.runs
+
+    def with_runs(self, runs: int | None = None, seed: int | None = None) -> SweepSpec:
+        """The same sweep with another number of initial states and/or seed."""
+        raw = {**self.raw, "initial_states": dict(self.raw["initial_states"])}
+        if runs is not None:
+            raw["initial_states"]["runs"] = runs
+        if seed is not None:
+            raw["initial_states"]["seed"] = seed
+        return parse_spec(raw)
+
+    def identity(self) -> dict[str, Any]:
+        """What determines the numbers (not how they are computed), for result keys."""
+        return {
+            "factory": self.factory,
+            "fixed": self.fixed,
+            "initial_states": self.raw["initial_states"],
+            "t_end": self.t_end,
+            "metrics": self.raw.get("metrics", {}),
+            "solver": self.solver,
+        }
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read and validate a TOML sweep spec."""
+    p = Path(path)
+    try:
+        raw = tomllib.loads(p.read_text())
+    except FileNotFoundError as exc:
+        raise SpecError(f"spec file {str(p)!r} does not exist") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"spec file {str(p)!r} is not valid TOML: {exc}") from exc
+    return parse_spec(raw)
+
+
+def parse_spec(raw: dict[str, Any]) -> SweepSpec:
+    """Validate a spec given as a dictionary (the parsed TOML)."""
+    top = _keys(
+        "spec",
+        raw,
+        {"system", "initial_states", "horizon"},
+        {"name", "rows", "grid", "scenarios", "metrics", "solver", "execution"},
+    )
+    name = _name("name", top.get("name", "sweep"))
+    system = _keys("system", top["system"], {"factory"}, {"fixed"})
+    if not isinstance(system["factory"], str):
+        raise SpecError(f"`system.factory` must be a string; got {system['factory']!r}")
+    fixed = system.get("fixed", {})
+    if not isinstance(fixed, dict):
+        raise SpecError("`system.fixed` must be a table of keyword arguments")
+    if "rows" in top and "grid" in top:
+        raise SpecError("give either `rows` or `grid`, not both")
+    rows = _rows(top)
+    scenarios = _scenarios(top.get("scenarios", [{"name": "default"}]))
+    ini = _keys("initial_states", top["initial_states"], {"low", "high", "runs", "seed"}, set())
+    for k in ("low", "high"):
+        if not isinstance(ini[k], list) or not ini[k]:
+            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {ini[k]!r}")
+    low = tuple(float(_number(f"initial_states.low[{i}]", v)) for i, v in enumerate(ini["low"]))
+    high = tuple(float(_number(f"initial_states.high[{i}]", v)) for i, v in enumerate(ini["high"]))
+    if len(low) != len(high):
+        raise SpecError(
+            f"`initial_states.low` has {len(low)} entries but `initial_states.high` has {len(high)}"
+        )
+    if any(h < lo for lo, h in zip(low, high, strict=True)):
+        raise SpecError("`initial_states.high` must be >= `initial_states.low` entrywise")
+    states = InitialStates(
+        low,
+        high,
+        int(_number("initial_states.runs", ini["runs"], lower=1, integer=True)),
+        int(_number("initial_states.seed", ini["seed"], lower=0, integer=True)),
+    )
+    hor = _keys("horizon", top["horizon"], {"t_end"}, set())
+    t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
+    met = _keys(
+        "metrics", top.get("metrics", {}), set(), {"transmissions_window", "error_window", "error_grid_step"}
+    )
+    metrics = Metrics(
+        _pair("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end])),
+        _pair("metrics.error_window", met.get("error_window", [0.0, t_end])),
+        float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
+    )
+    solver = _keys("solver", top.get("solver", {}), set(), _SOLVER_KEYS)
+    try:
+        SolverOptions(**solver)
+    except InputError as exc:
+        raise SpecError(f"`solver`: {exc}") from exc
+    _keys("execution", top.get("execution", {}), set(), {"chunk_size"})
+    return SweepSpec(
+        name=name,
+        factory=system["factory"],
+        fixed=dict(fixed),
+        rows=rows,
+        scenarios=scenarios,
+        initial_states=states,
+        t_end=t_end,
+        metrics=metrics,
+        solver=dict(solver),
+        raw=raw,
+    )
+
+
+def _rows(top: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+    if "grid" in top:
+        grid = top["grid"]
+        if not isinstance(grid, dict) or not grid:
+            raise SpecError("`grid` must be a table mapping each parameter to a list of values")
+        for k, vals in grid.items():
+            if not isinstance(vals, list) or not vals:
+                raise SpecError(f"`grid.{k}` must be a non-empty list of values; got {vals!r}")
+        keys = list(grid)
+        return tuple(dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values()))
+    rows = top.get("rows", [{}])
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+        raise SpecError("`rows` must be a non-empty array of tables ([[rows]])")
+    return tuple(dict(r) for r in rows)
+
+
+def _scenarios(items: Any) -> tuple[Scenario, ...]:
+    if not isinstance(items, list) or not items or not all(isinstance(s, dict) for s in items):
+        raise SpecError("`scenarios` must be a non-empty array of tables ([[scenarios]])")
+    out, seen = [], set()
+    for i, s in enumerate(items):
+        if "name" not in s:
+            raise SpecError(f"missing key `scenarios[{i}].name`")
+        nm = _name(f"scenarios[{i}].name", s["name"])
+        if nm in seen:
+            raise SpecError(f"`scenarios[{i}].name` repeats {nm!r}")
+        seen.add(nm)
+        out.append(Scenario(nm, {k: v for k, v in s.items() if k != "name"}))
+    return tuple(out)
+
+
+def chunk_size(spec: SweepSpec, default: int = 20) -> int:
+    """The ``execution.chunk_size`` of the spec (runs per chunk)."""
+    value = spec.raw.get("execution", {}).get("chunk_size", default)
+    return int(_number("execution.chunk_size", value, lower=1, integer=True))

@@ -1,0 +1,91 @@
+"""Persistence of a sweep: every finished chunk is written atomically under its key.
+
+Layout of an output folder::
+
+    spec.json          the resolved spec (what determines the numbers)
+    meta.json          seed, package versions, start and end times
+    chunks/KEY__A-B.json        records of runs A..B of one row and scenario
+    chunks/KEY__A-B.error.json  the error of a chunk that failed
+
+``KEY`` is a hash of the spec's identity, the row and the scenario, so results of a
+changed spec are never mixed with old ones, and a rerun finds what is already done.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from etobs.experiments.spec import SweepSpec
+from etobs.experiments.systems import factory_kwargs
+
+
+def _canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=repr)
+
+
+def task_key(spec: SweepSpec, row: int, scenario: int) -> str:
+    """Hash of everything that determines the numbers of one row under one scenario."""
+    ident = {"spec": spec.identity(), "kwargs": factory_kwargs(spec, row, scenario)}
+    return hashlib.sha256(_canonical(ident).encode()).hexdigest()[:20]
+
+
+def atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` so that readers see the old file or the whole new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class ResultStore:
+    """Chunk files of one output folder."""
+
+    def __init__(self, out: str | Path) -> None:
+        self.out = Path(out)
+        self.chunks = self.out / "chunks"
+        self.chunks.mkdir(parents=True, exist_ok=True)
+
+    def _name(self, key: str, runs: tuple[int, ...]) -> str:
+        return f"{key}__{runs[0]:06d}-{runs[-1]:06d}"
+
+    def write(self, key: str, runs: tuple[int, ...], records: list[dict[str, Any]]) -> None:
+        """Persist a finished chunk (and forget an earlier failure of the same runs)."""
+        name = self._name(key, runs)
+        atomic_write(self.chunks / f"{name}.json", _canonical({"key": key, "records": records}))
+        (self.chunks / f"{name}.error.json").unlink(missing_ok=True)
+
+    def write_error(self, key: str, runs: tuple[int, ...], error: str) -> None:
+        """Record a failed chunk with its error."""
+        payload = {"key": key, "runs": list(runs), "error": error}
+        atomic_write(self.chunks / f"{self._name(key, runs)}.error.json", _canonical(payload))
+
+    def records(self, key: str) -> dict[int, dict[str, Any]]:
+        """Every stored run of ``key``, each once (the first file wins on overlap)."""
+        out: dict[int, dict[str, Any]] = {}
+        for path in sorted(self.chunks.glob(f"{key}__*.json")):
+            if path.name.endswith(".error.json"):
+                continue
+            try:
+                data = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue  # unreadable: the runs will be computed again
+            for rec in data["records"]:
+                out.setdefault(int(rec["run"]), rec)
+        return out
+
+    def errors(self) -> list[dict[str, Any]]:
+        """The recorded failures still standing."""
+        return [json.loads(p.read_text()) for p in sorted(self.chunks.glob("*.error.json"))]

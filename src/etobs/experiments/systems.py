@@ -1,0 +1,78 @@
+"""Resolve a spec's ``system.factory`` and build the problem of one row and scenario."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from etobs.estimation.problem import EstimationProblem
+from etobs.examples import robot_arm
+from etobs.experiments.spec import SpecError, SweepSpec
+
+#: Factories that a spec can name directly.
+REGISTRY: dict[str, Callable[..., EstimationProblem]] = {"robot_arm": robot_arm}
+
+
+def resolve_factory(name: str) -> Callable[..., EstimationProblem]:
+    """A registered name, ``"package.module:function"`` or ``"path/to/file.py:function"``."""
+    if name in REGISTRY:
+        return REGISTRY[name]
+    if ":" not in name:
+        raise SpecError(
+            f"`system.factory` = {name!r} is neither a registered example ({', '.join(REGISTRY)}) "
+            "nor of the form 'package.module:function' or 'path/file.py:function'"
+        )
+    where, _, attr = name.rpartition(":")
+    try:
+        if where.endswith(".py"):
+            loc = importlib.util.spec_from_file_location(Path(where).stem, where)
+            if loc is None or loc.loader is None or not Path(where).exists():
+                raise ImportError(f"no file {where!r}")
+            module = importlib.util.module_from_spec(loc)
+            loc.loader.exec_module(module)
+        else:
+            module = importlib.import_module(where)
+    except ImportError as exc:
+        raise SpecError(f"`system.factory`: cannot import {where!r}: {exc}") from exc
+    fn = getattr(module, attr, None)
+    if not callable(fn):
+        raise SpecError(f"`system.factory`: {where!r} has no callable {attr!r}")
+    return fn
+
+
+def factory_kwargs(spec: SweepSpec, row: int, scenario: int) -> dict[str, Any]:
+    """Keyword arguments of one row under one scenario: fixed, then row, then scenario."""
+    return {**spec.fixed, **spec.rows[row], **spec.scenarios[scenario].params}
+
+
+def check_factory(spec: SweepSpec) -> None:
+    """Fail early, naming the key, when a row or scenario passes an unknown argument."""
+    fn = resolve_factory(spec.factory)
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):  # builtins without a signature: checked when called
+        return
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
+        return
+    for r in range(len(spec.rows)):
+        for s in range(len(spec.scenarios)):
+            for key in factory_kwargs(spec, r, s):
+                if key not in sig.parameters:
+                    raise SpecError(
+                        f"parameter `{key}` (row {r}, scenario {spec.scenarios[s].name!r}) is not an "
+                        f"argument of the factory {spec.factory!r}; it takes: {', '.join(sig.parameters)}"
+                    )
+
+
+def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem:
+    """The estimation problem of ``row`` under ``scenario``."""
+    problem = resolve_factory(spec.factory)(**factory_kwargs(spec, row, scenario))
+    if not isinstance(problem, EstimationProblem):
+        raise SpecError(
+            f"the factory {spec.factory!r} returned {type(problem).__name__}, not an EstimationProblem"
+        )
+    return problem
