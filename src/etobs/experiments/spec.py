@@ -168,11 +168,16 @@ class SweepSpec:
         return parse_spec(raw)
 
     def identity(self) -> dict[str, Any]:
-        """What determines the numbers (not how they are computed), for result keys."""
+        """What determines the numbers of a run, for result keys.
+
+        The number of runs is left out: run ``k``'s initial state is the ``k``-th row of
+        the seeded draw whatever the total, so more runs reuse the ones already stored.
+        """
+        states = {k: v for k, v in self.raw["initial_states"].items() if k != "runs"}
         return {
             "factory": self.factory,
             "fixed": self.fixed,
-            "initial_states": self.raw["initial_states"],
+            "initial_states": states,
             "t_end": self.t_end,
             "metrics": self.raw.get("metrics", {}),
             "solver": self.solver,

@@ -1,0 +1,28 @@
+"""Sweep factories for the tests: a cheap scalar system that can misbehave on demand."""
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from etobs import DynamicRule, EstimationProblem, Linear, Node, Observer, Plant, Quadratic
+
+
+def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker=""):
+    """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
+
+    fail: raise (a chunk that fails); delay: sleep (a slow chunk); die_marker: kill the
+    calling process the first time (a worker that dies), creating the marker file.
+    """
+    if fail:
+        raise ValueError("this row fails on purpose")
+    if delay:
+        time.sleep(delay)
+    if die_marker and not Path(die_marker).exists():
+        Path(die_marker).write_text("died once")
+        os._exit(3)
+    plant = Plant(f_p=lambda t, x, u, v: -k * x + np.sin(t)[:, None], h=lambda x: x, n_x=1, n_y=1)
+    obs = Observer(f_o=lambda t, z, u, ybar, yhat: -k * z + np.sin(t)[:, None] + 2.0 * (ybar - yhat), n_z=1)
+    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.1, b=1.0, eps=eps, eta0=1.0)
+    return EstimationProblem(plant, obs, [Node((0,), rule)])

@@ -1,0 +1,88 @@
+import pytest
+
+from etobs.experiments import SpecError, load_spec, parse_spec
+from etobs.experiments.table1 import table1_spec
+
+from .conftest import raw_spec
+
+
+def test_table1_spec_is_the_paper_table():
+    spec = load_spec("examples/table1.toml")
+    assert spec == table1_spec()
+    assert len(spec.rows) == 13 and [s.name for s in spec.scenarios] == ["with_v_m", "without_v_m"]
+    assert spec.n_runs == 2600
+    assert spec.rows[12] == {
+        "sigma": [600.0, 800.0],
+        "eps": [10.0, 10.0],
+        "a": [2.0, 3.0],
+        "ell": [100.0, 100.0],
+    }
+    x0 = spec.initial_states.draw()
+    assert x0.shape == (100, 4) and x0[:, 0].max() <= 20 and x0[:, 1].max() <= 10
+
+
+def test_grid_is_a_cartesian_product():
+    raw = raw_spec()
+    del raw["rows"]
+    raw["grid"] = {"k": [1.0, 2.0, 3.0], "eps": [0.1, 0.2]}
+    spec = parse_spec(raw)
+    assert len(spec.rows) == 6 and spec.rows[1] == {"k": 1.0, "eps": 0.2}
+
+
+def test_with_runs_and_seed():
+    spec = parse_spec(raw_spec()).with_runs(9, 3)
+    assert spec.initial_states.runs == 9 and spec.initial_states.seed == 3
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"colour": 1}, r"unknown key `spec.colour`; allowed keys of `spec`: execution, grid, horizon"),
+        ({"horizon": {"t_end": 3.0, "dt": 1}}, r"unknown key `horizon.dt`"),
+        ({"horizon": {"t_end": -1.0}}, r"`horizon.t_end` must be > 0; got -1.0"),
+        ({"horizon": {"t_end": "30"}}, r"`horizon.t_end` must be a number; got '30'"),
+        ({"horizon": {}}, r"missing key `horizon.t_end`"),
+        (
+            {"initial_states": {"low": [0], "high": [1], "runs": 0, "seed": 1}},
+            r"`initial_states.runs` must be >= 1; got 0",
+        ),
+        (
+            {"initial_states": {"low": [0], "high": [1], "runs": 2.5, "seed": 1}},
+            r"`initial_states.runs` must be an integer; got 2.5",
+        ),
+        (
+            {"initial_states": {"low": [0, 0], "high": [1], "runs": 2, "seed": 1}},
+            r"`initial_states.low` has 2 entries but `initial_states.high` has 1",
+        ),
+        (
+            {"initial_states": {"low": [2], "high": [1], "runs": 2, "seed": 1}},
+            r"`initial_states.high` must be >= `initial_states.low`",
+        ),
+        (
+            {"metrics": {"error_window": [3, 2]}},
+            r"`metrics.error_window` must satisfy start <= stop; got \[3, 2\]",
+        ),
+        ({"metrics": {"error_window": 20}}, r"`metrics.error_window` must be a pair \[start, stop\]; got 20"),
+        ({"solver": {"rtol": 0.0}}, r"`solver`: `rtol` must be >= 1e-14; got 0"),
+        ({"solver": {"tolerance": 1e-3}}, r"unknown key `solver.tolerance`"),
+        ({"scenarios": [{"name": "a"}, {"name": "a"}]}, r"`scenarios\[1\].name` repeats 'a'"),
+        ({"scenarios": [{"noise": True}]}, r"missing key `scenarios\[0\].name`"),
+        ({"scenarios": [{"name": "a b"}]}, r"`scenarios\[0\].name` must be a non-empty name"),
+        ({"grid": {"k": [1]}}, r"give either `rows` or `grid`, not both"),
+        ({"rows": []}, r"`rows` must be a non-empty array of tables"),
+        ({"system": {"factory": 3}}, r"`system.factory` must be a string; got 3"),
+        ({"execution": {"workers": 3}}, r"unknown key `execution.workers`"),
+    ],
+)
+def test_bad_specs_name_the_key(change, match):
+    with pytest.raises(SpecError, match=match):
+        parse_spec(raw_spec(**change))
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(SpecError, match=r"spec file '.*nope.toml' does not exist"):
+        load_spec(tmp_path / "nope.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = [")
+    with pytest.raises(SpecError, match=r"spec file '.*bad.toml' is not valid TOML"):
+        load_spec(bad)

@@ -1,0 +1,188 @@
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from etobs.experiments import parse_spec, run_sweep
+from etobs.experiments.spec import SpecError
+from etobs.experiments.systems import build_problem, check_factory, resolve_factory
+
+from .conftest import FACTORY, raw_spec
+
+
+def read_runs(out):
+    return (out / "runs.csv").read_text()
+
+
+def test_same_numbers_whatever_the_executor_workers_and_chunking(tiny, tmp_path):
+    serial = run_sweep(tiny, tmp_path / "serial", executor="serial", chunk=5, progress=False)
+    pooled = run_sweep(tiny, tmp_path / "pool", executor="process", workers=2, chunk=1, progress=False)
+    assert serial.complete and pooled.complete
+    assert len(serial.runs) == tiny.n_runs == 20
+    assert read_runs(tmp_path / "serial") == read_runs(tmp_path / "pool")
+    assert (tmp_path / "serial" / "aggregate.csv").read_text() == (
+        tmp_path / "pool" / "aggregate.csv"
+    ).read_text()
+
+
+def test_outputs_and_resume(tiny, tmp_path):
+    first = run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert (first.computed, first.reused) == (20, 0)
+    again = run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert (again.computed, again.reused) == (0, 20)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert meta["seed"] == 7 and meta["runs_present"] == 20 and "numpy" in meta["versions"]
+    assert json.loads((tmp_path / "spec.json").read_text())["name"] == "tiny"
+    header = read_runs(tmp_path).splitlines()[0].split(",")
+    assert header[:4] == ["row", "scenario", "run", "k"]
+    assert "transmissions_node0" in header and "error" in header
+    agg = first.aggregate
+    assert [(a["row"], a["scenario"], a["runs"]) for a in agg] == [
+        (0, "coarse", 5),
+        (0, "fine", 5),
+        (1, "coarse", 5),
+        (1, "fine", 5),
+    ]
+    # a finer threshold never transmits less on average
+    assert agg[1]["transmissions_mean"] > agg[0]["transmissions_mean"]
+    assert "| row | scenario |" in (tmp_path / "report.md").read_text()
+    # a changed spec gets new keys: nothing is reused from the old one
+    other = run_sweep(
+        parse_spec(raw_spec(horizon={"t_end": 2.5})), tmp_path, executor="serial", progress=False
+    )
+    assert other.reused == 0
+
+
+def test_more_runs_reuse_the_first_ones(tiny, tmp_path):
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    more = run_sweep(tiny.with_runs(8), tmp_path, executor="serial", progress=False)
+    assert (more.computed, more.reused) == (12, 20)
+    run_sweep(tiny.with_runs(8), tmp_path / "fresh", executor="serial", progress=False)
+    assert read_runs(tmp_path) == read_runs(tmp_path / "fresh")
+
+
+def test_a_failing_chunk_is_recorded_and_the_sweep_goes_on(tmp_path):
+    spec = parse_spec(raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "fail": True}]))
+    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
+    assert not res.complete
+    assert len(res.runs) == 10 and {r["row"] for r in res.runs} == {0}
+    assert len(res.failures) == 6  # row 1: 2 scenarios x 3 chunks of at most 2 runs
+    assert "this row fails on purpose" in res.failures[0]["error"]
+    assert "failed chunk" in (tmp_path / "report.md").read_text()
+
+
+def test_factory_errors_name_the_problem(tmp_path):
+    with pytest.raises(
+        SpecError, match=r"parameter `q` \(row 0, scenario 'coarse'\) is not an argument of the factory"
+    ):
+        check_factory(parse_spec(raw_spec(rows=[{"q": 1}])))
+    with pytest.raises(SpecError, match=r"`system.factory` = 'pendulum' is neither a registered example"):
+        resolve_factory("pendulum")
+    with pytest.raises(SpecError, match=r"`system.factory`: cannot import 'no_such_module'"):
+        resolve_factory("no_such_module:f")
+    with pytest.raises(SpecError, match=r"has no callable 'nothing'"):
+        resolve_factory(FACTORY.replace(":scalar", ":nothing"))
+    bad = parse_spec(raw_spec(system={"factory": "builtins:dict"}))
+    with pytest.raises(SpecError, match=r"returned dict, not an EstimationProblem"):
+        build_problem(bad, 0, 0)
+
+
+def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
+    marker = tmp_path / "died"
+    spec = parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"die_marker": str(marker)}}))
+    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=2, progress=False)
+    assert marker.exists()  # one worker really died
+    assert res.complete
+    keys = [(r["row"], r["scenario"], r["run"]) for r in res.runs]
+    assert len(keys) == len(set(keys)) == spec.n_runs
+
+
+def test_a_killed_driver_resumes_and_every_run_is_present_once(tmp_path):
+    spec_file = tmp_path / "slow.toml"
+    fixed = "{ delay = 0.15 }"
+    spec_file.write_text(
+        f'name = "slow"\n[system]\nfactory = "{FACTORY}"\nfixed = {fixed}\n'
+        "[[rows]]\nk = 1.0\n[[rows]]\nk = 2.0\n"
+        "[initial_states]\nlow = [-1.0]\nhigh = [1.0]\nruns = 12\nseed = 5\n[horizon]\nt_end = 2.0\n"
+    )
+    out = tmp_path / "out"
+    cmd = [
+        sys.executable,
+        "-m",
+        "etobs.cli.main",
+        "sweep",
+        str(spec_file),
+        "--out",
+        str(out),
+        "--executor",
+        "serial",
+        "--chunk-size",
+        "1",
+        "--no-progress",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while len(list((out / "chunks").glob("*.json"))) < 5 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    stored = len(list((out / "chunks").glob("*__*.json")))
+    assert 5 <= stored < 24  # killed mid-way
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    lines = (out / "runs.csv").read_text().splitlines()[1:]
+    keys = [tuple(line.split(",")[:3]) for line in lines]
+    assert len(keys) == len(set(keys)) == 24
+    assert f"({24 - stored} computed now, {stored} reused)" in done.stdout
+    clean = subprocess.run(
+        [*cmd[:6], str(tmp_path / "clean"), "--executor", "serial", "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert clean.returncode == 0
+    assert (tmp_path / "clean" / "runs.csv").read_text() == (out / "runs.csv").read_text()
+    assert not list((out / "chunks").glob(".*tmp"))  # no half-written files left visible
+
+
+def test_dask_executor_gives_the_same_numbers(tiny, tmp_path):
+    distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
+    # A scheduler and one worker in this process, listening on 127.0.0.1 only.
+    with distributed.LocalCluster(
+        n_workers=1,
+        threads_per_worker=2,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        by_address = run_sweep(
+            tiny,
+            tmp_path / "addr",
+            executor="dask",
+            scheduler=cluster.scheduler_address,
+            chunk=3,
+            progress=False,
+        )
+        with distributed.Client(cluster) as client:
+            by_client = run_sweep(tiny, tmp_path / "client", executor="dask", client=client, progress=False)
+    assert by_address.complete and by_client.complete
+    run_sweep(tiny, tmp_path / "serial", executor="serial", progress=False)
+    assert read_runs(tmp_path / "addr") == read_runs(tmp_path / "serial") == read_runs(tmp_path / "client")
+
+
+def test_executor_errors(tiny, tmp_path):
+    from etobs import InputError
+
+    with pytest.raises(
+        InputError, match=r"`executor` must be one of \('serial', 'process', 'dask'\); got 'gpu'"
+    ):
+        run_sweep(tiny, tmp_path, executor="gpu", progress=False)
+    with pytest.raises(InputError, match=r"`workers` must be a positive integer; got 0"):
+        run_sweep(tiny, tmp_path, workers=0, progress=False)
+    with pytest.raises(InputError, match=r"needs `scheduler`"):
+        run_sweep(tiny, tmp_path / "d", executor="dask", progress=False)
