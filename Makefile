@@ -22,6 +22,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff format --check src tests benchmarks
 	$(BIN)/python -m pytest --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
+	$(BIN)/python benchmarks/bench_scaling.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -30,6 +31,7 @@ test-fast: $(VENV)/.installed-test
 ## bench: the benchmarks at full size
 bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_robot_arm.py
+	$(BIN)/python benchmarks/bench_scaling.py
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis

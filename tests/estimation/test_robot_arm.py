@@ -136,3 +136,18 @@ def test_paper_matrices_and_initial_conditions():
         10,
         10,
     )
+
+
+def test_robot_arm_network_repeats_the_arm():
+    from etobs.examples import robot_arm_network
+
+    x0 = random_initial_states(2, seed=1)
+    single = simulate(robot_arm(), x0, 2.0, save=SaveAt(steps=False))
+    net = simulate(
+        robot_arm_network(3), np.concatenate([x0, x0[::-1], x0], axis=1), 2.0, save=SaveAt(steps=False)
+    )
+    assert net.n_nodes == 6
+    per_arm = single.transmissions.counts(2, 2)
+    np.testing.assert_array_equal(
+        net.transmissions.counts(2, 6), np.hstack([per_arm, per_arm[::-1], per_arm])
+    )

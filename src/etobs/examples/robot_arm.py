@@ -148,3 +148,46 @@ def random_initial_states(n: int, seed: int | np.random.Generator | None = 0) ->
     rng = np.random.default_rng(seed)
     hi = np.array([20.0, 10.0, 20.0, 10.0])
     return rng.uniform(0.0, 1.0, size=(n, 4)) * hi
+
+
+def robot_arm_network(n_arms: int, **rule: Any) -> EstimationProblem:
+    """``n_arms`` independent robot arms observed together: ``N = 2 n_arms`` sensor nodes.
+
+    A scalable version of the case study for benchmarks: plant and observer are the
+    paper's arm repeated (``4 n_arms`` states each), node ``2k`` sends ``x_1`` and node
+    ``2k + 1`` sends ``x_2`` of arm ``k``, all with the paper's rule (keyword arguments
+    as in :func:`robot_arm`, e.g. ``eps=(10, 10)``), noise and disturbance.
+    """
+    n_arms = v.integer("n_arms", n_arms, lower=1)
+    one = robot_arm(**rule)
+    blocks = [slice(4 * k, 4 * k + 4) for k in range(n_arms)]
+    outs = np.array([i for k in range(n_arms) for i in (4 * k, 4 * k + 1)])
+    amp_v = np.tile(one.v.amplitude, n_arms)
+    amp_m = np.tile(one.m.amplitude, n_arms)
+
+    def f_p(t: np.ndarray, x: np.ndarray, u: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        return np.concatenate([one.plant.f_p(t, x[:, b], u, dist[:, b]) for b in blocks], axis=1)
+
+    def f_o(t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
+        parts = [
+            one.observer.f_o(t, z[:, b], u, ybar[:, 2 * k : 2 * k + 2], yhat[:, 2 * k : 2 * k + 2])
+            for k, b in enumerate(blocks)
+        ]
+        return np.concatenate(parts, axis=1)
+
+    n = 4 * n_arms
+    plant = Plant(f_p=f_p, h=lambda x: x[:, outs], n_x=n, n_y=2 * n_arms, n_u=1, n_v=n, name="robot arms")
+    observer = Observer(f_o=f_o, n_z=n, name="polytopic Luenberger (per arm)")
+    nodes = tuple(
+        Node(outputs=(2 * k + i,), rule=one.nodes[i].rule, name=f"arm {k + 1} sensor {i + 1}")
+        for k in range(n_arms)
+        for i in range(2)
+    )
+    return EstimationProblem(
+        plant=plant,
+        observer=observer,
+        nodes=nodes,
+        u=one.u,
+        v=Sinusoid(amplitude=amp_v, omega=0.4),
+        m=Sinusoid(amplitude=amp_m, omega=0.3),
+    )
