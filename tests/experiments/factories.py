@@ -9,7 +9,7 @@ import numpy as np
 from etobs import DynamicRule, EstimationProblem, Linear, Node, Observer, Plant, Quadratic
 
 
-def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker=""):
+def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False):
     """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
 
     fail: raise (a chunk that fails); delay: sleep (a slow chunk); die_marker: kill the
@@ -19,6 +19,8 @@ def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker=""):
         raise ValueError("this row fails on purpose")
     if delay:
         time.sleep(delay)
+    if die_always:
+        os._exit(3)
     if die_marker and not Path(die_marker).exists():
         Path(die_marker).write_text("died once")
         os._exit(3)

@@ -86,3 +86,25 @@ def test_bad_files(tmp_path):
     bad.write_text("name = [")
     with pytest.raises(SpecError, match=r"spec file '.*bad.toml' is not valid TOML"):
         load_spec(bad)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"rows": [{"run": 1}]}, r"parameter `rows\[0\].run` clashes with a result column; rename it"),
+        ({"scenarios": [{"name": "a", "status": 1}]}, r"parameter `scenarios\[0\].status` clashes"),
+        ({"system": {"factory": "x:y", "fixed": {"x0_1": 2}}}, r"parameter `system.fixed.x0_1` clashes"),
+        (
+            {"metrics": {"error_window": [2.0, 4.0]}},
+            r"`metrics.error_window` must lie within \[0, horizon.t_end = 3\]",
+        ),
+        (
+            {"metrics": {"transmissions_window": [-1.0, 3.0]}},
+            r"`metrics.transmissions_window` must lie within",
+        ),
+        ({"execution": {"chunk_size": 0}}, r"`execution.chunk_size` must be >= 1; got 0"),
+    ],
+)
+def test_more_bad_specs(change, match):
+    with pytest.raises(SpecError, match=match):
+        parse_spec(raw_spec(**change))

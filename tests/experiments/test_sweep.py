@@ -51,7 +51,7 @@ def test_outputs_and_resume(tiny, tmp_path):
     assert "| row | scenario |" in (tmp_path / "report.md").read_text()
     # a changed spec gets new keys: nothing is reused from the old one
     other = run_sweep(
-        parse_spec(raw_spec(horizon={"t_end": 2.5})), tmp_path, executor="serial", progress=False
+        parse_spec(raw_spec(solver={"rtol": 1e-8})), tmp_path, executor="serial", progress=False
     )
     assert other.reused == 0
 
@@ -186,3 +186,105 @@ def test_executor_errors(tiny, tmp_path):
         run_sweep(tiny, tmp_path, workers=0, progress=False)
     with pytest.raises(InputError, match=r"needs `scheduler`"):
         run_sweep(tiny, tmp_path / "d", executor="dask", progress=False)
+
+
+def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_path):
+    failing = parse_spec(raw_spec(rows=[{"k": 1.0, "fail": True}]))
+    first = run_sweep(failing, tmp_path, executor="serial", chunk=2, progress=False)
+    assert len(first.failures) == 6
+    # Same key space is not shared (fail=True is a parameter); simulate a fixed factory by
+    # storing the runs under the failing key through a successful spec with that key.
+    from etobs.experiments.store import ResultStore, task_key
+
+    store = ResultStore(tmp_path)
+    key = task_key(failing, 0, 0)
+    ok_records = run_sweep(
+        parse_spec(raw_spec(rows=[{"k": 1.0}])), tmp_path / "ok", executor="serial", progress=False
+    ).runs
+    recs = [
+        {
+            "run": r["run"],
+            "status": r["status"],
+            "transmissions": [r["transmissions"]],
+            "error": r["error"],
+            "min_inter_event_time": [None],
+            "x0": [0.0],
+            "steps": 1,
+        }
+        for r in ok_records
+        if r["scenario"] == "coarse"
+    ]
+    store.write(key, tuple(range(5)), recs)  # one chunk of 5 covering the 3 failed chunks of 2
+    again = run_sweep(failing, tmp_path, executor="serial", chunk=5, progress=False)
+    # 'fine' still fails: one standing failure (the chunk of 5 supersedes the three older
+    # chunks of 2); the 'coarse' errors are gone since its runs are now stored
+    assert [(f["where"], f["runs"]) for f in again.failures] == [("row 0, scenario 'fine'", [0, 1, 2, 3, 4])]
+    assert not list((tmp_path / "chunks").glob(f"{key}__*.error.json"))
+
+
+def test_fewer_runs_use_only_the_first_ones(tiny, tmp_path):
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    fewer = run_sweep(tiny.with_runs(3), tmp_path, executor="serial", progress=False)
+    assert fewer.complete and (fewer.computed, fewer.reused) == (0, 12)
+    assert sorted({r["run"] for r in fewer.runs}) == [0, 1, 2]
+
+
+def test_a_group_without_runs_keeps_its_line(tmp_path):
+    spec = parse_spec(raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "fail": True}]))
+    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
+    assert [(a["row"], a["runs"]) for a in res.aggregate] == [(0, 5), (0, 5), (1, 0), (1, 0)]
+    assert res.aggregate[2]["transmissions_mean"] is None
+    assert "| 0 | 0 | n/a | n/a | n/a | n/a |" in (tmp_path / "report.md").read_text()
+
+
+def test_only_the_chunk_that_kills_its_worker_is_blamed(tmp_path):
+    spec = parse_spec(
+        raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "die_always": True}], scenarios=[{"name": "only"}])
+    )
+    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=5, progress=False)
+    assert [(f["where"], f["runs"]) for f in res.failures] == [("row 1, scenario 'only'", [0, 1, 2, 3, 4])]
+    assert "died 3 times in a row" in res.failures[0]["error"]
+    assert sorted(r["row"] for r in res.runs) == [0] * 5
+
+
+def test_bad_chunk_and_numpy_parameters(tmp_path):
+    import numpy as np
+
+    from etobs import InputError
+
+    spec = parse_spec(
+        raw_spec(
+            rows=[{"k": np.float64(1.0)}],
+            initial_states={"low": [-1.0], "high": [1.0], "runs": np.int64(2), "seed": 7},
+        )
+    )
+    with pytest.raises(InputError, match=r"`chunk` must be a positive integer \(runs per chunk\); got -1"):
+        run_sweep(spec, tmp_path, chunk=-1, progress=False)
+    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
+    assert res.complete and '"k": 1.0' in (tmp_path / "spec.json").read_text()
+
+
+def test_dimension_mismatch_is_named(tmp_path):
+    spec = parse_spec(raw_spec(initial_states={"low": [0.0, 0.0], "high": [1.0, 1.0], "runs": 2, "seed": 1}))
+    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
+    assert (
+        "`initial_states.low` and `.high` have 2 entries but the plant has n_x = 1"
+        in res.failures[0]["error"]
+    )
+
+
+def test_keys_ignore_how_numbers_are_written(tmp_path):
+    from etobs.experiments.store import task_key
+
+    a = parse_spec(raw_spec(rows=[{"k": 1}], initial_states={"low": [-1], "high": [1], "runs": 5, "seed": 7}))
+    b = parse_spec(
+        raw_spec(
+            rows=[{"k": 1.0}], metrics={}, initial_states={"low": [-1.0], "high": [1.0], "runs": 9, "seed": 7}
+        )
+    )
+    c = parse_spec(raw_spec(rows=[{}], system={"factory": FACTORY, "fixed": {"k": 1.0}}))
+    assert task_key(a, 0, 0) != task_key(b, 0, 0)  # the metrics differ (defaults vs tiny's)
+    b2 = parse_spec(
+        raw_spec(rows=[{"k": 1.0}], initial_states={"low": [-1.0], "high": [1.0], "runs": 9, "seed": 7})
+    )
+    assert task_key(a, 0, 0) == task_key(b2, 0, 0) == task_key(c, 0, 0)

@@ -18,8 +18,8 @@ from etobs.errors import InputError
 from etobs.experiments.runner import Task, run_task
 
 EXECUTORS = ("serial", "process", "dask")
-#: A process pool whose worker died is restarted this many times before the tasks
-#: still pending are recorded as failed.
+#: After a worker dies, each chunk it may have taken down is rerun alone this many
+#: times before it is recorded as failed.
 MAX_POOL_RESTARTS = 3
 
 Done = Callable[[Task, list[dict[str, Any]]], None]
@@ -67,29 +67,35 @@ def _process(
 ) -> None:
     # "spawn" starts clean workers: safe with threads, the same on every platform.
     ctx = multiprocessing.get_context("spawn")
-    pending = list(tasks)
-    restarts = 0
-    while pending:
-        lost: list[Task] = []
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = {pool.submit(run_task, raw, t): t for t in pending}
-            for fut in as_completed(futures):
-                task = futures[fut]
-                try:
-                    records = fut.result()
-                except BrokenProcessPool:
-                    lost.append(task)
-                except Exception:
-                    on_error(task, traceback.format_exc())
-                else:
-                    on_done(task, records)
-        pending = lost
-        if pending:
-            restarts += 1
-            if restarts > MAX_POOL_RESTARTS:
-                for task in pending:
-                    on_error(task, f"a worker process died {restarts} times while this chunk was pending")
-                return
+    lost = _pool_round(list(tasks), raw, on_done, on_error, workers, ctx)
+    # A dead worker breaks the whole pool and every pending chunk with it. Rerun those
+    # chunks one at a time, so only a chunk that itself kills its worker is blamed.
+    for task in lost:
+        for attempt in range(1, MAX_POOL_RESTARTS + 1):
+            if not _pool_round([task], raw, on_done, on_error, 1, ctx):
+                break
+            if attempt == MAX_POOL_RESTARTS:
+                on_error(task, f"the worker process running this chunk died {attempt} times in a row")
+
+
+def _pool_round(
+    tasks: list[Task], raw: dict[str, Any], on_done: Done, on_error: Failed, workers: int | None, ctx: Any
+) -> list[Task]:
+    """Run ``tasks`` on a fresh pool; return those lost because a worker died."""
+    lost: list[Task] = []
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = {pool.submit(run_task, raw, t): t for t in tasks}
+        for fut in as_completed(futures):
+            task = futures[fut]
+            try:
+                records = fut.result()
+            except BrokenProcessPool:
+                lost.append(task)
+            except Exception:
+                on_error(task, traceback.format_exc())
+            else:
+                on_done(task, records)
+    return lost
 
 
 def _dask(
@@ -111,7 +117,10 @@ def _dask(
             raise InputError(
                 "the dask executor needs `scheduler` (an address such as tcp://host:8786) or a client"
             )
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from exc
     try:
         futures = [client.submit(run_task, raw, t, pure=False) for t in tasks]
         index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
@@ -119,6 +128,8 @@ def _dask(
             task = index[fut.key]
             if fut.status == "error":
                 on_error(task, "".join(traceback.format_exception(fut.exception())))
+            elif fut.status == "cancelled":
+                on_error(task, "the Dask future of this chunk was cancelled")
             else:
                 on_done(task, fut.result())
     finally:

@@ -40,7 +40,7 @@ def run_task(raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
     """
     spec: SweepSpec = parse_spec(raw_spec)
     problem = build_problem(spec, task.row, task.scenario)
-    x0 = spec.initial_states.draw()[list(task.runs)]
+    x0 = spec.initial_states.draw(max(task.runs) + 1)[list(task.runs)]
     lo, hi = spec.metrics.error_window
     hi = min(hi, spec.t_end)
     step = spec.metrics.error_grid_step

@@ -74,6 +74,8 @@ def _keys(where: str, table: Any, required: set[str], optional: set[str]) -> dic
 def _number(
     key: str, value: Any, *, lower: float | None = None, integer: bool = False, strict: bool = False
 ) -> float:
+    if isinstance(value, np.generic):
+        value = value.item()
     ok = isinstance(value, int) if integer else isinstance(value, (int, float))
     if isinstance(value, bool) or not ok:
         kind = "an integer" if integer else "a number"
@@ -94,6 +96,27 @@ def _pair(key: str, value: Any) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
+def _window(key: str, value: Any, t_end: float) -> tuple[float, float]:
+    lo, hi = _pair(key, value)
+    if lo < 0 or hi > t_end:
+        raise SpecError(f"`{key}` must lie within [0, horizon.t_end = {t_end:g}]; got {value!r}")
+    return lo, hi
+
+
+#: Columns of the result tables; a parameter may not take one of these names.
+RESERVED = ("row", "scenario", "run", "status", "transmissions", "error", "steps", "runs", "completed")
+_RESERVED_PREFIXES = ("transmissions_", "min_inter_event_time_", "x0_", "error_", "paper_")
+
+
+def _check_names(rows: tuple[dict[str, Any], ...], scenarios: tuple[Any, ...], fixed: dict[str, Any]) -> None:
+    tables = [("system.fixed", fixed)] + [(f"rows[{i}]", r) for i, r in enumerate(rows)]
+    tables += [(f"scenarios[{i}]", s.params) for i, s in enumerate(scenarios)]
+    for where, table in tables:
+        for key in table:
+            if key in RESERVED or key.startswith(_RESERVED_PREFIXES):
+                raise SpecError(f"parameter `{where}.{key}` clashes with a result column; rename it")
+
+
 def _name(key: str, value: Any) -> str:
     if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
         raise SpecError(f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {value!r}")
@@ -109,11 +132,15 @@ class InitialStates:
     runs: int
     seed: int
 
-    def draw(self) -> np.ndarray:
-        """All ``runs`` initial states, shape ``(runs, n_x)``; the same for every row and scenario."""
+    def draw(self, count: int | None = None) -> np.ndarray:
+        """The first ``count`` (default ``runs``) initial states, shape ``(count, n_x)``.
+
+        Row ``k`` is the same whatever ``count``, and for every row and scenario.
+        """
         rng = np.random.default_rng(self.seed)
         lo, hi = np.array(self.low), np.array(self.high)
-        return lo + rng.uniform(0.0, 1.0, size=(self.runs, lo.size)) * (hi - lo)
+        n = self.runs if count is None else count
+        return lo + rng.uniform(0.0, 1.0, size=(n, lo.size)) * (hi - lo)
 
 
 @dataclass(frozen=True)
@@ -170,18 +197,39 @@ class SweepSpec:
     def identity(self) -> dict[str, Any]:
         """What determines the numbers of a run, for result keys.
 
-        The number of runs is left out: run ``k``'s initial state is the ``k``-th row of
-        the seeded draw whatever the total, so more runs reuse the ones already stored.
+        Resolved values are used, so ``1`` and ``1.0`` or an omitted default and the
+        same value written out give the same key. The number of runs is left out: run
+        ``k``'s initial state is the ``k``-th row of the seeded draw whatever the total,
+        so more runs reuse the ones already stored. The etobs version is included, so
+        an upgrade never mixes old and new numbers. (A change to a user factory's code is
+        not seen: use a new output folder.)
         """
-        states = {k: v for k, v in self.raw["initial_states"].items() if k != "runs"}
-        return {
-            "factory": self.factory,
-            "fixed": self.fixed,
-            "initial_states": states,
-            "t_end": self.t_end,
-            "metrics": self.raw.get("metrics", {}),
-            "solver": self.solver,
-        }
+        from etobs import __version__
+
+        st, m = self.initial_states, self.metrics
+        return normalize(
+            {
+                "etobs": __version__,
+                "factory": self.factory,
+                "initial_states": {"low": st.low, "high": st.high, "seed": st.seed},
+                "t_end": self.t_end,
+                "metrics": [m.transmissions_window, m.error_window, m.error_grid_step],
+                "solver": self.options.__dict__,
+            }
+        )
+
+
+def normalize(obj: Any) -> Any:
+    """JSON-ready copy: numpy scalars to Python, ints to floats, tuples to lists."""
+    if isinstance(obj, dict):
+        return {str(k): normalize(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [normalize(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        return float(obj)
+    return obj
 
 
 def load_spec(path: str | Path) -> SweepSpec:
@@ -239,8 +287,8 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         "metrics", top.get("metrics", {}), set(), {"transmissions_window", "error_window", "error_grid_step"}
     )
     metrics = Metrics(
-        _pair("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end])),
-        _pair("metrics.error_window", met.get("error_window", [0.0, t_end])),
+        _window("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end]), t_end),
+        _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end),
         float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
     )
     solver = _keys("solver", top.get("solver", {}), set(), _SOLVER_KEYS)
@@ -248,7 +296,10 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         SolverOptions(**solver)
     except InputError as exc:
         raise SpecError(f"`solver`: {exc}") from exc
-    _keys("execution", top.get("execution", {}), set(), {"chunk_size"})
+    execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size"})
+    if "chunk_size" in execution:
+        _number("execution.chunk_size", execution["chunk_size"], lower=1, integer=True)
+    _check_names(rows, scenarios, fixed)
     return SweepSpec(
         name=name,
         factory=system["factory"],

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from etobs.experiments.spec import SweepSpec
+from etobs.experiments.spec import SweepSpec, normalize
 from etobs.experiments.systems import factory_kwargs
 
 
@@ -30,7 +30,7 @@ def _canonical(obj: Any) -> str:
 
 def task_key(spec: SweepSpec, row: int, scenario: int) -> str:
     """Hash of everything that determines the numbers of one row under one scenario."""
-    ident = {"spec": spec.identity(), "kwargs": factory_kwargs(spec, row, scenario)}
+    ident = {"spec": spec.identity(), "kwargs": normalize(factory_kwargs(spec, row, scenario))}
     return hashlib.sha256(_canonical(ident).encode()).hexdigest()[:20]
 
 
@@ -67,13 +67,19 @@ class ResultStore:
         atomic_write(self.chunks / f"{name}.json", _canonical({"key": key, "records": records}))
         (self.chunks / f"{name}.error.json").unlink(missing_ok=True)
 
-    def write_error(self, key: str, runs: tuple[int, ...], error: str) -> None:
-        """Record a failed chunk with its error."""
-        payload = {"key": key, "runs": list(runs), "error": error}
+    def write_error(self, key: str, runs: tuple[int, ...], error: str, where: str = "") -> None:
+        """Record a failed chunk with its error (``where``: its row and scenario, for reports)."""
+        payload = {"key": key, "runs": list(runs), "error": error, "where": where}
+        for path in self.chunks.glob(f"{key}__*.error.json"):  # superseded by this failure
+            try:
+                if set(json.loads(path.read_text())["runs"]) <= set(runs):
+                    path.unlink(missing_ok=True)
+            except (OSError, json.JSONDecodeError, KeyError):
+                continue
         atomic_write(self.chunks / f"{self._name(key, runs)}.error.json", _canonical(payload))
 
-    def records(self, key: str) -> dict[int, dict[str, Any]]:
-        """Every stored run of ``key``, each once (the first file wins on overlap)."""
+    def records(self, key: str, runs: int | None = None) -> dict[int, dict[str, Any]]:
+        """Stored runs ``0 .. runs-1`` of ``key`` (all when ``runs`` is None), each once."""
         out: dict[int, dict[str, Any]] = {}
         for path in sorted(self.chunks.glob(f"{key}__*.json")):
             if path.name.endswith(".error.json"):
@@ -83,9 +89,28 @@ class ResultStore:
             except (OSError, json.JSONDecodeError):
                 continue  # unreadable: the runs will be computed again
             for rec in data["records"]:
-                out.setdefault(int(rec["run"]), rec)
+                if runs is None or int(rec["run"]) < runs:
+                    out.setdefault(int(rec["run"]), rec)
         return out
 
-    def errors(self) -> list[dict[str, Any]]:
-        """The recorded failures still standing."""
-        return [json.loads(p.read_text()) for p in sorted(self.chunks.glob("*.error.json"))]
+    def errors(self, key: str, present: set[int], runs: int) -> list[dict[str, Any]]:
+        """Failures of ``key`` still standing: some of their runs below ``runs`` are missing.
+
+        Error files whose runs have all been stored since (in any chunking) are deleted.
+        """
+        out = []
+        for path in sorted(self.chunks.glob(f"{key}__*.error.json")):
+            try:
+                err = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue
+            if set(err["runs"]) <= present:
+                path.unlink(missing_ok=True)
+            elif any(r < runs and r not in present for r in err["runs"]):
+                out.append(err)
+        return out
+
+    def clean_temporary(self) -> None:
+        """Remove temporary files left by a writer that was killed mid-write."""
+        for path in self.chunks.glob(".*.tmp"):
+            path.unlink(missing_ok=True)

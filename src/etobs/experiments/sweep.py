@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from etobs.errors import InputError
 from etobs.experiments.executors import execute
 from etobs.experiments.progress import Progress
 from etobs.experiments.runner import Task
@@ -63,7 +64,7 @@ def plan(spec: SweepSpec, store: ResultStore, size: int) -> tuple[list[Task], in
     for r in range(len(spec.rows)):
         for s in range(len(spec.scenarios)):
             key = task_key(spec, r, s)
-            done = store.records(key)
+            done = store.records(key, spec.initial_states.runs)
             reused += len(done)
             missing = [k for k in range(spec.initial_states.runs) if k not in done]
             for start in range(0, len(missing), size):
@@ -101,10 +102,15 @@ def run_sweep(
         Show a progress line on stderr.
 
     """
+    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
+        raise InputError(f"`chunk` must be a positive integer (runs per chunk); got {chunk!r}")
     check_factory(spec)
     store = ResultStore(out)
+    store.clean_temporary()
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    atomic_write(store.out / "spec.json", json.dumps(spec.raw, indent=2, sort_keys=True) + "\n")
+    atomic_write(
+        store.out / "spec.json", json.dumps(normalize_json(spec.raw), indent=2, sort_keys=True) + "\n"
+    )
     tasks, reused = plan(spec, store, chunk or chunk_size(spec))
     bar = Progress(spec.n_runs, spec.name, enabled=progress)
     bar.update(done=reused)
@@ -117,7 +123,8 @@ def run_sweep(
         bar.update(done=len(records))
 
     def failed(task: Task, message: str) -> None:
-        store.write_error(task.key, task.runs, message)
+        where = f"row {task.row}, scenario {spec.scenarios[task.scenario].name!r}"
+        store.write_error(task.key, task.runs, message, where)
         bar.update(failed=len(task.runs))
 
     try:
@@ -140,23 +147,25 @@ def run_sweep(
 
 def collect(spec: SweepSpec, store: ResultStore, *, computed: int = 0, reused: int = 0) -> SweepResult:
     """Gather the stored records of ``spec`` into tables."""
-    groups, param_names = [], []
+    groups, param_names, failures = [], [], []
+    n = spec.initial_states.runs
     for r in range(len(spec.rows)):
         for s, scen in enumerate(spec.scenarios):
             params = {**spec.rows[r], **scen.params}
             for k in flatten_params(params):
                 if k not in param_names:
                     param_names.append(k)
-            records = list(store.records(task_key(spec, r, s)).values())
-            groups.append((r, scen.name, params, records))
+            key = task_key(spec, r, s)
+            stored = store.records(key, n)
+            groups.append((r, scen.name, params, list(stored.values())))
+            failures += store.errors(key, set(stored), n)
     runs = run_rows(groups)
-    keys = {task_key(spec, r, s) for r in range(len(spec.rows)) for s in range(len(spec.scenarios))}
-    failures = [e for e in store.errors() if e["key"] in keys]
+    keys = [(r, name, flatten_params(params)) for r, name, params, _ in groups]
     return SweepResult(
         spec=spec,
         out=store.out,
         runs=runs,
-        aggregate=aggregate(runs, param_names),
+        aggregate=aggregate(runs, param_names, keys),
         computed=computed,
         reused=reused,
         failures=failures,
@@ -202,8 +211,19 @@ def _write_outputs(result: SweepResult, started: str) -> None:
     ]
     for f in result.failures:
         last = f["error"].strip().splitlines()[-1] if f["error"].strip() else ""
-        text.append(f"- failed chunk `{f['key']}` runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
+        text.append(f"- failed: {f.get('where', '')} runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
     atomic_write(out / "report.md", "\n".join(text) + "\n")
+
+
+def normalize_json(obj: Any) -> Any:
+    """The spec as JSON-ready data (numpy scalars converted), integers kept."""
+    if isinstance(obj, dict):
+        return {str(k): normalize_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [normalize_json(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
 
 
 def _versions() -> dict[str, str]:

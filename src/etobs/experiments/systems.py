@@ -50,8 +50,14 @@ def factory_kwargs(spec: SweepSpec, row: int, scenario: int) -> dict[str, Any]:
 
 
 def check_factory(spec: SweepSpec) -> None:
-    """Fail early, naming the key, when a row or scenario passes an unknown argument."""
-    fn = resolve_factory(spec.factory)
+    """Fail early, naming the key, when a row or scenario passes an unknown argument.
+
+    The factory itself is not called here: it runs in the workers.
+    """
+    _check_arguments(spec, resolve_factory(spec.factory))
+
+
+def _check_arguments(spec: SweepSpec, fn: Callable[..., EstimationProblem]) -> None:
     try:
         sig = inspect.signature(fn)
     except (TypeError, ValueError):  # builtins without a signature: checked when called
@@ -71,6 +77,11 @@ def check_factory(spec: SweepSpec) -> None:
 def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem:
     """The estimation problem of ``row`` under ``scenario``."""
     problem = resolve_factory(spec.factory)(**factory_kwargs(spec, row, scenario))
+    n = len(spec.initial_states.low)
+    if isinstance(problem, EstimationProblem) and problem.plant.n_x != n:
+        raise SpecError(
+            f"`initial_states.low` and `.high` have {n} entries but the plant has n_x = {problem.plant.n_x}"
+        )
     if not isinstance(problem, EstimationProblem):
         raise SpecError(
             f"the factory {spec.factory!r} returned {type(problem).__name__}, not an EstimationProblem"

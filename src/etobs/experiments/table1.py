@@ -81,7 +81,7 @@ def compare(result: SweepResult) -> list[dict[str, Any]]:
             runs=agg["completed"],
         )
         n, s = agg["completed"], agg["transmissions_std"]
-        if n and s is not None and agg["transmissions_mean"] is not None:
+        if n > 1 and s is not None and agg["transmissions_mean"] is not None:
             se = s * math.sqrt(1.0 / n + 1.0 / PAPER_RUNS)
             z = (agg["transmissions_mean"] - line["paper_transmissions"]) / se if se > 0 else math.inf
             line.update(transmissions_se=se, transmissions_z=z, within_uncertainty=abs(z) <= Z_LIMIT)

@@ -53,23 +53,31 @@ def _stats(values: Sequence[float | None]) -> dict[str, float | None]:
     arr = np.array([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if arr.size == 0:
         return {"mean": None, "std": None, "min": None, "max": None}
-    std = float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+    std = float(arr.std(ddof=1)) if arr.size > 1 else None
     return {"mean": float(arr.mean()), "std": std, "min": float(arr.min()), "max": float(arr.max())}
 
 
-def aggregate(runs: list[dict[str, Any]], param_names: Sequence[str]) -> list[dict[str, Any]]:
+def aggregate(
+    runs: list[dict[str, Any]],
+    param_names: Sequence[str],
+    keys: Sequence[tuple[int, str, dict[str, Any]]],
+) -> list[dict[str, Any]]:
     """Mean, sample std, min and max of transmissions and error per (row, scenario).
 
-    Statistics use the completed runs only; ``runs`` and ``completed`` count them.
+    ``keys`` lists every ``(row, scenario, flat params)`` of the sweep, so a group with no
+    run present still gets a line (``runs = 0``, statistics ``None``). Statistics use the
+    completed runs only; ``runs`` and ``completed`` count them; the std of fewer than two
+    values is ``None``.
     """
-    groups: dict[tuple[int, str], list[dict[str, Any]]] = {}
+    groups: dict[tuple[int, str], list[dict[str, Any]]] = {(r, s): [] for r, s, _ in keys}
     for r in runs:
-        groups.setdefault((r["row"], r["scenario"]), []).append(r)
+        groups[(r["row"], r["scenario"])].append(r)
+    params = {(r, s): p for r, s, p in keys}
     out = []
-    for (row, scenario), items in sorted(groups.items()):
+    for (row, scenario), items in groups.items():
         ok = [r for r in items if r["status"] == "completed"]
         line: dict[str, Any] = {"row": row, "scenario": scenario}
-        line.update({k: items[0].get(k) for k in param_names})
+        line.update({k: params[(row, scenario)].get(k) for k in param_names})
         line["runs"] = len(items)
         line["completed"] = len(ok)
         for metric in ("transmissions", "error"):
