@@ -35,7 +35,10 @@ def test_outputs_and_resume(tiny, tmp_path):
     assert (again.computed, again.reused) == (0, 20)
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert meta["seed"] == 7 and meta["runs_present"] == 20 and "numpy" in meta["versions"]
-    assert json.loads((tmp_path / "spec.json").read_text())["name"] == "tiny"
+    written = json.loads((tmp_path / "spec.json").read_text())
+    assert written["as_given"]["name"] == "tiny"
+    assert written["resolved"]["solver"]["rtol"] == 1e-10  # defaults filled in
+    assert written["resolved"]["metrics"]["error_window"] == [2.0, 3.0]
     header = read_runs(tmp_path).splitlines()[0].split(",")
     assert header[:4] == ["row", "scenario", "run", "k"]
     assert "transmissions_node0" in header and "error" in header

@@ -2,7 +2,7 @@
 
 Layout of an output folder::
 
-    spec.json          the resolved spec (what determines the numbers)
+    spec.json          the spec as given and resolved (defaults filled in)
     meta.json          seed, package versions, start and end times
     chunks/KEY__A-B.json        records of runs A..B of one row and scenario
     chunks/KEY__A-B.error.json  the error of a chunk that failed

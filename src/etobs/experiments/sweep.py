@@ -108,9 +108,19 @@ def run_sweep(
     store = ResultStore(out)
     store.clean_temporary()
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    atomic_write(
-        store.out / "spec.json", json.dumps(normalize_json(spec.raw), indent=2, sort_keys=True) + "\n"
-    )
+    resolved = {
+        "name": spec.name,
+        "factory": spec.factory,
+        "fixed": spec.fixed,
+        "rows": list(spec.rows),
+        "scenarios": [{"name": sc.name, **sc.params} for sc in spec.scenarios],
+        "initial_states": spec.initial_states.__dict__,
+        "t_end": spec.t_end,
+        "metrics": spec.metrics.__dict__,
+        "solver": spec.options.__dict__,
+    }
+    written = normalize_json({"as_given": spec.raw, "resolved": resolved})
+    atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
     tasks, reused = plan(spec, store, chunk or chunk_size(spec))
     bar = Progress(spec.n_runs, spec.name, enabled=progress)
     bar.update(done=reused)
@@ -222,7 +232,9 @@ def normalize_json(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [normalize_json(v) for v in obj]
     if isinstance(obj, np.generic):
-        return obj.item()
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return str(obj)  # JSON has no inf (e.g. max_step)
     return obj
 
 
