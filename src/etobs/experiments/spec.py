@@ -219,15 +219,20 @@ class SweepSpec:
         )
 
 
-def normalize(obj: Any) -> Any:
-    """JSON-ready copy: numpy scalars to Python, ints to floats, tuples to lists."""
+def normalize(obj: Any, *, ints_as_floats: bool = True) -> Any:
+    """JSON-ready copy: numpy scalars to Python, tuples to lists, inf and NaN to strings.
+
+    With ``ints_as_floats`` (for result keys) ``1`` and ``1.0`` become the same value.
+    """
     if isinstance(obj, dict):
-        return {str(k): normalize(v) for k, v in obj.items()}
+        return {str(k): normalize(v, ints_as_floats=ints_as_floats) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, np.ndarray)):
-        return [normalize(v) for v in obj]
+        return [normalize(v, ints_as_floats=ints_as_floats) for v in obj]
     if isinstance(obj, np.generic):
         obj = obj.item()
-    if isinstance(obj, int) and not isinstance(obj, bool):
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return str(obj)
+    if ints_as_floats and isinstance(obj, int) and not isinstance(obj, bool):
         return float(obj)
     return obj
 

@@ -15,7 +15,7 @@ from etobs.errors import InputError
 from etobs.experiments.executors import execute
 from etobs.experiments.progress import Progress
 from etobs.experiments.runner import Task
-from etobs.experiments.spec import SweepSpec, chunk_size
+from etobs.experiments.spec import SweepSpec, chunk_size, normalize
 from etobs.experiments.store import ResultStore, atomic_write, task_key
 from etobs.experiments.systems import check_factory, factory_kwargs
 from etobs.experiments.tables import aggregate, flatten_params, run_rows, to_csv, to_markdown
@@ -119,7 +119,7 @@ def run_sweep(
         "metrics": spec.metrics.__dict__,
         "solver": spec.options.__dict__,
     }
-    written = normalize_json({"as_given": spec.raw, "resolved": resolved})
+    written = normalize({"as_given": spec.raw, "resolved": resolved}, ints_as_floats=False)
     atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
     tasks, reused = plan(spec, store, chunk or chunk_size(spec))
     bar = Progress(spec.n_runs, spec.name, enabled=progress)
@@ -223,19 +223,6 @@ def _write_outputs(result: SweepResult, started: str) -> None:
         last = f["error"].strip().splitlines()[-1] if f["error"].strip() else ""
         text.append(f"- failed: {f.get('where', '')} runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
     atomic_write(out / "report.md", "\n".join(text) + "\n")
-
-
-def normalize_json(obj: Any) -> Any:
-    """The spec as JSON-ready data (numpy scalars converted), integers kept."""
-    if isinstance(obj, dict):
-        return {str(k): normalize_json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [normalize_json(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return str(obj)  # JSON has no inf (e.g. max_step)
-    return obj
 
 
 def _versions() -> dict[str, str]:
