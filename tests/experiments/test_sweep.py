@@ -291,3 +291,12 @@ def test_keys_ignore_how_numbers_are_written(tmp_path):
         raw_spec(rows=[{"k": 1.0}], initial_states={"low": [-1.0], "high": [1.0], "runs": 9, "seed": 7})
     )
     assert task_key(a, 0, 0) == task_key(b2, 0, 0) == task_key(c, 0, 0)
+
+
+def test_unreachable_dask_scheduler_is_an_input_error(tiny, tmp_path):
+    pytest.importorskip("distributed", reason="the dask extra is not installed")
+    from etobs import InputError
+
+    # Nothing listens on port 1 of the loopback address; the client gives up after 10 s.
+    with pytest.raises(InputError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:1'"):
+        run_sweep(tiny, tmp_path, executor="dask", scheduler="tcp://127.0.0.1:1", progress=False)
