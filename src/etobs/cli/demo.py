@@ -28,7 +28,8 @@ PAPER_MIN_INTER_EVENT = (0.201, 0.112)
 GRID_STEP = 1e-3
 
 
-def _floats(text: str, n: int, what: str) -> list[float]:
+def _floats(text: str, what: str, example: str) -> list[float]:
+    n = example.count(",") + 1
     parts = [p for p in text.replace(" ", "").split(",") if p]
     try:
         vals = [float(p) for p in parts]
@@ -36,8 +37,7 @@ def _floats(text: str, n: int, what: str) -> list[float]:
         vals = []
     if len(vals) != n or not all(np.isfinite(vals)):
         raise argparse.ArgumentTypeError(
-            f"{what} must be {n} comma-separated finite numbers (e.g. "
-            f"{','.join(str(int(x)) for x in ((3, 2, 3, -2) if n == 4 else (20, 30)))}); got {text!r}"
+            f"{what} must be {n} comma-separated finite numbers (e.g. {example}); got {text!r}"
         )
     return vals
 
@@ -54,14 +54,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", type=Path, default=Path("robot-arm-out"), help="output folder")
     p.add_argument(
         "--x0",
-        type=lambda s: _floats(s, 4, "--x0"),
+        type=lambda s: _floats(s, "--x0", "3,2,3,-2"),
         default=list(X0_PAPER),
         help="plant initial state x1,x2,x3,x4 (default 3,2,3,-2)",
     )
     p.add_argument("--t-end", type=float, default=30.0, help="horizon in seconds (default 30)")
     p.add_argument(
         "--window",
-        type=lambda s: _floats(s, 2, "--window"),
+        type=lambda s: _floats(s, "--window", "20,30"),
         default=[20.0, 30.0],
         help="window of the max |x - xhat| metric (default 20,30)",
     )

@@ -276,7 +276,7 @@ class _FastSolver:
         too_many = (self.n_steps[act] + self.n_rejected[act]) >= o.max_steps
         ia = np.flatnonzero(accept)
         if ia.size:
-            self._accept(act[ia], t[ia], x[ia], f[ia], h[ia], last[ia], K[:, ia], x_new[ia])
+            self._accept(act[ia], t[ia], x[ia], h[ia], last[ia], K[:, ia], x_new[ia])
         still = act[too_many]
         self.status[still[self.status[still] == Status.RUNNING]] = Status.MAX_STEPS
 
@@ -285,7 +285,6 @@ class _FastSolver:
         runs: np.ndarray,
         t0: np.ndarray,
         x0: np.ndarray,
-        f0: np.ndarray,
         h: np.ndarray,
         last: np.ndarray,
         K: np.ndarray,
@@ -408,12 +407,6 @@ def _parabola_peaks(seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         peak = mid - (right - left) ** 2 / (8.0 * curv)
         theta = (np.arange(1, S)[None, :, None] + (left - right) / (2.0 * curv)) / S
     return np.where(is_max, peak, -np.inf), np.where(is_max, theta, np.nan)
-
-
-def _peak_value(seq: np.ndarray) -> np.ndarray:
-    """Largest predicted parabola peak per row and rule, shape (M, m)."""
-    peak, _ = _parabola_peaks(seq)
-    return peak.max(axis=1) if peak.shape[1] else np.full((seq.shape[0], seq.shape[2]), -np.inf)
 
 
 def peak_probe(seq: np.ndarray) -> np.ndarray:
