@@ -45,6 +45,12 @@ def check_inputs(system: Any, x0: Any, t_span: Any) -> tuple[np.ndarray, float, 
     """Validate the arguments shared by both backends; return ``(x0 (B, n), t0, t_end)``."""
     if not isinstance(system, HybridSystem):
         raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
+    t0, t_end = span(t_span)
+    return v.batch("x0", x0, system.n), t0, t_end
+
+
+def span(t_span: Any) -> tuple[float, float]:
+    """Validate a time span ``(t0, t_end)`` with ``t0 <= t_end``."""
     try:
         t0, t_end = t_span
     except (TypeError, ValueError) as exc:
@@ -53,7 +59,7 @@ def check_inputs(system: Any, x0: Any, t_span: Any) -> tuple[np.ndarray, float, 
     t_end = v.real("t_span[1]", t_end)
     if t_end < t0:
         raise InputError(f"`t_span` must satisfy t0 <= t_end; got ({t0:g}, {t_end:g})")
-    return v.batch("x0", x0, system.n), t0, t_end
+    return t0, t_end
 
 
 def solve(

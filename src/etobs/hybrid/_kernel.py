@@ -1,0 +1,175 @@
+"""The compiled solver kernel (numba): one run per thread, the fast solver's algorithm.
+
+This module imports numba at the top; :mod:`etobs.hybrid.compiled` imports it only
+when the compiled backend is asked for, so numba stays optional.
+
+The algorithm is the one of :mod:`etobs.hybrid.solver` (see its contract), written
+for one run at a time so that no work is done for runs that do not need it:
+
+* steps of an embedded Runge--Kutta pair with the same step-size controller;
+* on every accepted step, the event functions sampled on the dense output at
+  ``event_samples - 1`` interior points, the step end and a parabolic peak probe;
+* the first crossing bracketed and refined by regula falsi (Illinois) with bisection
+  safeguard to ``event_xtol`` in time, the event reported at the right end;
+* all rules with ``g_k >= 0`` jump once, in rule order, until all are negative.
+
+User functions (numba-compiled, passed as arguments) have the signatures
+
+``flow(t, x, p, args, dx)``
+    write ``x'`` into ``dx``;
+``guard(t, x, p, args, g)``
+    write the event function of every rule into ``g`` (jump where ``g_k >= 0``);
+``jump(k, t, x, p, args)``
+    apply rule ``k``'s jump map to ``x`` in place;
+
+where ``p`` is the run's parameter vector (a row of ``P``) and ``args`` any value
+shared by all runs (typically a tuple of arrays).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numba
+import numpy as np
+
+from etobs.hybrid.tableau import TABLEAUS
+
+# Status codes: the values of etobs.hybrid.status.Status (checked by a test).
+RUNNING = -1
+COMPLETED = 0
+MAX_JUMPS = 1
+MAX_STEPS = 2
+NONFINITE = 3
+STEP_UNDERFLOW = 4
+
+SAFETY = 0.9
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+MAX_ROOT_ITER = 200
+EPS = np.finfo(np.float64).eps
+
+# Indices into the float and integer option vectors.
+F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
+I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS = 0, 1, 2, 3
+
+
+@numba.njit
+def _combine_into(w, K, nstage, out):
+    """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
+    n = out.shape[0]
+    for i in range(n):
+        out[i] = 0.0
+    for k in range(nstage):
+        wk = w[k]
+        if wk != 0.0:
+            for i in range(n):
+                out[i] += wk * K[k, i]
+
+
+@numba.njit
+def _dense_eval(Q, nq, dop853, x0, theta, out):
+    """Continuous extension at ``theta`` (see ``Tableau.evaluate``)."""
+    n = x0.shape[0]
+    one_minus = 1.0 - theta
+    for i in range(n):
+        acc = 0.0
+        if dop853:
+            for r in range(nq):
+                acc += Q[nq - 1 - r, i]
+                acc *= theta if r % 2 == 0 else one_minus
+        else:
+            for r in range(nq):
+                acc = (acc + Q[nq - 1 - r, i]) * theta
+        out[i] = x0[i] + acc
+
+
+@numba.njit
+def _any_nonneg(g):
+    for k in range(g.shape[0]):
+        if g[k] >= 0.0:
+            return True
+    return False
+
+
+@numba.njit
+def _all_finite(x):
+    for i in range(x.shape[0]):
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
+@numba.njit
+def _peak_probe(g0, gs, ns, S):
+    """Earliest θ where a parabola through a negative local maximum reaches zero.
+
+    Samples are ``g0`` at θ = 0 then ``gs[0..S-1]`` at θ = 1/S, ..., 1 (see
+    :func:`etobs.hybrid.solver.peak_probe`).
+    """
+    m = g0.shape[0]
+    best = np.inf
+    for i in range(1, S):  # interior sample i at θ = i/S is gs[i - 1]
+        for k in range(m):
+            left = g0[k] if i == 1 else gs[i - 2, k]
+            mid = gs[i - 1, k]
+            right = gs[i, k]
+            curv = left - 2.0 * mid + right
+            if mid > left and mid >= right and mid < 0 and curv < 0:
+                peak = mid - (right - left) ** 2 / (8.0 * curv)
+                if peak >= 0:
+                    theta = (i + (left - right) / (2.0 * curv)) / S
+                    if theta < best:
+                        best = theta
+    if best == np.inf:
+        return np.nan
+    return best
+
+
+_BODY = Path(__file__).with_name("_kernel_body.py")
+
+
+def tableau_constants(method: str) -> dict[str, object]:
+    """The method's coefficients, laid out as the kernel template reads them."""
+    tab = TABLEAUS[method]
+    dop853 = tab.dense_a is not None
+    s = tab.stages
+    return {
+        "TA": np.ascontiguousarray(tab.a),
+        "TB": np.ascontiguousarray(tab.b),
+        "TC": np.ascontiguousarray(tab.c),
+        "TE": np.ascontiguousarray(tab.e),
+        "TE3": np.ascontiguousarray(tab.e_low if tab.e_low is not None else np.zeros_like(tab.e)),
+        "TDA": np.ascontiguousarray(tab.dense_a if dop853 else np.zeros((0, s + 1))),
+        "TDC": np.ascontiguousarray(tab.dense_c if dop853 else np.zeros(0)),
+        # rows: one per dense coefficient (Dormand--Prince 5(4) stores P transposed)
+        "TDD": np.ascontiguousarray(tab.dense_d if dop853 else tab.dense_d.T),
+        "N_STAGES": s,
+        "N_EXTRA": tab.dense_a.shape[0] if dop853 else 0,
+        "NQ": 7 if dop853 else tab.dense_d.shape[1],
+        "ERR_ORDER": tab.error_order,
+        "DOP853": dop853,
+    }
+
+
+def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) -> Any:
+    """Compile the kernel for one set of user functions and one method.
+
+    The template's text runs in a fresh namespace where ``flow``, ``guard`` and
+    ``jump`` are globals, so numba treats them (and the tableau) as constants.
+    """
+    namespace: dict[str, Any] = {
+        "__name__": f"etobs.hybrid._kernel_body_{method}",
+        "flow": flow,
+        "guard": guard,
+        "jump": jump,
+        "N": int(n),
+        "N_WORK": max(int(n_work), 1),
+        "jit": numba.njit,
+        "jit_nogil": numba.njit(nogil=True),
+        **tableau_constants(method),
+    }
+    code = compile(_BODY.read_text(encoding="utf-8"), str(_BODY), "exec")
+    exec(code, namespace)
+    return namespace["_kernel"]

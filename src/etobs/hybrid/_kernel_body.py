@@ -1,0 +1,587 @@
+"""Template of the compiled solver kernel; :func:`etobs.hybrid._kernel.build` runs it.
+
+Not imported as a module: ``build`` executes this text in a namespace that holds the
+user's ``flow``, ``guard`` and ``jump``, the decorators ``jit``/``jit_nogil`` and the
+method's tableau as constants (``TA, TB, TC, TE, TE3, TDA, TDC, TDD, N_STAGES,
+N_EXTRA, NQ, ERR_ORDER, DOP853``), so that numba inlines the user functions and folds
+the coefficients. The algorithm is documented in :mod:`etobs.hybrid._kernel`.
+"""
+# ruff: noqa: F821
+
+import numpy as np
+
+from etobs.hybrid._kernel import (
+    COMPLETED,
+    EPS,
+    F_ATOL,
+    F_FIRST_STEP,
+    F_MAX_STEP,
+    F_RTOL,
+    F_XTOL,
+    I_KEEP_STEPS,
+    I_MAX_JUMPS,
+    I_MAX_STEPS,
+    I_SAMPLES,
+    MAX_FACTOR,
+    MAX_JUMPS,
+    MAX_ROOT_ITER,
+    MAX_STEPS,
+    MIN_FACTOR,
+    NONFINITE,
+    RUNNING,
+    SAFETY,
+    STEP_UNDERFLOW,
+    _all_finite,
+    _any_nonneg,
+    _dense_eval,
+    _peak_probe,
+)
+
+
+@jit_nogil
+def _kernel(
+    args,
+    X0,
+    P,
+    n_rules,
+    t0,
+    t_end,
+    fopt,
+    iopt,
+    grid,
+    log_cap,
+    arc_cap,
+    runs,
+    status,
+    t_final,
+    j_final,
+    x_final,
+    n_steps,
+    n_rejected,
+    log_n,
+    log_rule,
+    log_t,
+    log_j,
+    grid_x,
+    grid_j,
+    arc_n,
+    arc_t,
+    arc_j,
+    arc_x,
+):
+    for r in range(runs.shape[0]):
+        run = runs[r]
+        _solve_one(
+            args,
+            X0[run],
+            P[run],
+            n_rules,
+            t0,
+            t_end,
+            fopt,
+            iopt,
+            grid,
+            log_cap,
+            arc_cap,
+            run,
+            r,
+            status,
+            t_final,
+            j_final,
+            x_final,
+            n_steps,
+            n_rejected,
+            log_n,
+            log_rule,
+            log_t,
+            log_j,
+            grid_x,
+            grid_j,
+            arc_n,
+            arc_t,
+            arc_j,
+            arc_x,
+        )
+
+
+@jit
+def _solve_one(
+    args,
+    x_init,
+    p,
+    m,
+    t0,
+    t_end,
+    fopt,
+    iopt,
+    grid,
+    log_cap,
+    arc_cap,
+    run,
+    slot,
+    status,
+    t_final,
+    j_final,
+    x_final,
+    n_steps,
+    n_rejected,
+    log_n,
+    log_rule,
+    log_t,
+    log_j,
+    grid_x,
+    grid_j,
+    arc_n,
+    arc_t,
+    arc_j,
+    arc_x,
+):
+    rtol, atol = fopt[F_RTOL], fopt[F_ATOL]
+    max_step, first_step, xtol_t = fopt[F_MAX_STEP], fopt[F_FIRST_STEP], fopt[F_XTOL]
+    max_jumps, max_steps, S = iopt[I_MAX_JUMPS], iopt[I_MAX_STEPS], iopt[I_SAMPLES]
+    dop853 = DOP853
+    keep_steps = iopt[I_KEEP_STEPS] != 0
+    n = N
+    s = N_STAGES  # stages without the FSAL one
+    n_extra = N_EXTRA
+    nq = NQ
+    err_exp = -1.0 / (ERR_ORDER + 1)
+    n_grid = grid.shape[0]
+
+    # the user's shared data travels with this run's own workspace
+    args = (args, np.empty(N_WORK))
+    K = np.empty((s + 1 + n_extra, n))
+    Q = np.empty((nq, n))
+    x = x_init.copy()
+    x_new = np.empty(n)
+    y = np.empty(n)
+    dy = np.empty(n)
+    xs = np.empty(n)
+    f = np.empty(n)
+    g = np.empty(m)
+    g1 = np.empty(m)
+    gl = np.empty(m)
+    gtmp = np.empty(m)
+    n_s = max(S - 1, 0)
+    th_s = np.empty(n_s + 2)
+    gs = np.empty((n_s + 2, m))
+    t = t0
+    j = 0
+    st = RUNNING
+    steps = 0
+    rejected_n = 0
+    nlog = 0
+    narc = 0
+    h = 0.0
+    was_rejected = False
+
+    # grid points at or after t0 (those before t0 are never filled)
+    gnext = 0
+    while gnext < n_grid and grid[gnext] < t0:
+        gnext += 1
+
+    if keep_steps:
+        if narc < arc_cap:
+            arc_t[slot, narc] = t
+            arc_j[slot, narc] = j
+            arc_x[slot, narc, :] = x
+        narc += 1
+    while gnext < n_grid and grid[gnext] <= t:
+        grid_x[run, gnext, :] = x
+        grid_j[run, gnext] = j
+        gnext += 1
+
+    # jumps at t0
+    st, j, nlog, narc = _jump_until_flow(
+        args,
+        p,
+        t,
+        x,
+        g,
+        m,
+        j,
+        max_jumps,
+        nlog,
+        narc,
+        keep_steps,
+        log_cap,
+        arc_cap,
+        slot,
+        log_rule,
+        log_t,
+        log_j,
+        arc_t,
+        arc_j,
+        arc_x,
+    )
+    if st == RUNNING:
+        flow(t, x, p, args[0], args[1], f)
+        if t >= t_end:
+            st = COMPLETED
+        elif not _all_finite(f):
+            st = NONFINITE
+    if st == RUNNING:
+        if first_step > 0.0:
+            h = first_step
+        else:
+            h = _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, xs)
+
+    while st == RUNNING:
+        # ---- one step (see _FastSolver._advance) ----
+        remaining = t_end - t
+        hh = min(min(h, max_step), remaining)
+        last = hh >= remaining
+        for i in range(n):
+            K[0, i] = f[i]
+        for i in range(1, s):
+            _comb(TA[i], K, i, dy)
+            for q in range(n):
+                y[q] = x[q] + hh * dy[q]
+            flow(t + TC[i] * hh, y, p, args[0], args[1], K[i])
+        _comb(TB, K, s, dy)
+        for q in range(n):
+            x_new[q] = x[q] + hh * dy[q]
+        flow(t + hh, x_new, p, args[0], args[1], K[s])
+        # error norm (see Tableau.error_norm)
+        _comb(TE, K, s + 1, dy)
+        e5 = 0.0
+        for q in range(n):
+            sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
+            dy[q] = dy[q] / sc
+            e5 += dy[q] * dy[q]
+        if dop853:
+            _comb(TE3, K, s + 1, y)
+            e3 = 0.0
+            for q in range(n):
+                sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
+                v3 = y[q] / sc
+                e3 += v3 * v3
+            denom = e5 + 0.01 * e3
+            err = 0.0 if denom == 0.0 else abs(hh) * e5 / np.sqrt(denom * n)
+        else:
+            err = abs(hh) * np.sqrt(e5 / n)
+        finite = np.isfinite(err) and _all_finite(x_new) and _all_finite(K[s])
+        accept = finite and err <= 1.0
+        if err == 0.0:
+            factor = MAX_FACTOR
+        elif finite:
+            factor = min(max(SAFETY * err**err_exp, MIN_FACTOR), MAX_FACTOR)
+        else:
+            factor = MIN_FACTOR
+        if (not accept) or was_rejected:
+            factor = min(factor, 1.0)
+        was_rejected = not accept
+        h_next = hh * factor
+        if accept:
+            steps += 1
+        else:
+            rejected_n += 1
+            if not (h_next > 4.0 * np.spacing(max(abs(t), 1.0))):
+                st = STEP_UNDERFLOW if finite else NONFINITE
+        h = max(h, h_next) if (last and accept) else h_next
+        too_many = steps + rejected_n >= max_steps
+        if accept:
+            # ---- accepted step (see _FastSolver._accept) ----
+            t_start = t
+            t1 = t_end if last else t + hh
+            guard(t1, x_new, p, args[0], args[1], g1)
+            have_q = m > 0 or n_grid > 0
+            if have_q:
+                _dense_coeffs(args, p, t_start, x, x_new, K, hh, Q, y, dy)
+            theta_ev = np.nan
+            if m > 0:
+                theta_ev = _locate(
+                    args, p, t_start, hh, x, Q, nq, dop853, g, g1, gl, gtmp, S, th_s, gs, xs, xtol_t
+                )
+            t_stop = t1
+            if np.isfinite(theta_ev) and theta_ev < 1.0:
+                t_stop = t_start + theta_ev * hh
+                _dense_eval(Q, nq, dop853, x, theta_ev, xs)
+                for q in range(n):
+                    x_new[q] = xs[q]
+            # grid values up to the stop time, before any jump there
+            while gnext < n_grid and grid[gnext] <= t_stop:
+                th = min(max((grid[gnext] - t_start) / hh, 0.0), 1.0)
+                _dense_eval(Q, nq, dop853, x, th, xs)
+                grid_x[run, gnext, :] = xs
+                grid_j[run, gnext] = j
+                gnext += 1
+            t = t_stop
+            for q in range(n):
+                x[q] = x_new[q]
+            if keep_steps:
+                if narc < arc_cap:
+                    arc_t[slot, narc] = t
+                    arc_j[slot, narc] = j
+                    arc_x[slot, narc, :] = x
+                narc += 1
+            if np.isfinite(theta_ev):
+                st, j, nlog, narc = _jump_until_flow(
+                    args,
+                    p,
+                    t,
+                    x,
+                    g,
+                    m,
+                    j,
+                    max_jumps,
+                    nlog,
+                    narc,
+                    keep_steps,
+                    log_cap,
+                    arc_cap,
+                    slot,
+                    log_rule,
+                    log_t,
+                    log_j,
+                    arc_t,
+                    arc_j,
+                    arc_x,
+                )
+                if st == RUNNING:
+                    flow(t, x, p, args[0], args[1], f)
+                    if t >= t_end:
+                        st = COMPLETED
+                    elif not _all_finite(f):
+                        st = NONFINITE
+            else:
+                for q in range(n):
+                    f[q] = K[s, q]
+                for k in range(m):
+                    g[k] = g1[k]
+                if last:
+                    st = COMPLETED
+        if too_many and st == RUNNING:
+            st = MAX_STEPS
+
+    status[run] = st
+    t_final[run] = t
+    j_final[run] = j
+    x_final[run, :] = x
+    n_steps[run] = steps
+    n_rejected[run] = rejected_n
+    log_n[run] = nlog
+    arc_n[run] = narc
+
+
+@jit
+def _jump_until_flow(
+    args,
+    p,
+    t,
+    x,
+    g,
+    m,
+    j,
+    max_jumps,
+    nlog,
+    narc,
+    keep_steps,
+    log_cap,
+    arc_cap,
+    slot,
+    log_rule,
+    log_t,
+    log_j,
+    arc_t,
+    arc_j,
+    arc_x,
+):
+    """Apply jumps until every event function is negative; returns (status, j, nlog, narc)."""
+    if m == 0:
+        return RUNNING, j, nlog, narc
+    while True:
+        guard(t, x, p, args[0], args[1], g)
+        if not _any_nonneg(g):
+            return RUNNING, j, nlog, narc
+        for k in range(m):
+            if g[k] < 0.0:
+                continue
+            if j >= max_jumps:
+                return MAX_JUMPS, j, nlog, narc
+            jump(k, t, x, p, args[0], args[1])
+            if nlog < log_cap:
+                log_rule[slot, nlog] = k
+                log_t[slot, nlog] = t
+                log_j[slot, nlog] = j
+            nlog += 1
+            j += 1
+            if keep_steps:
+                if narc < arc_cap:
+                    arc_t[slot, narc] = t
+                    arc_j[slot, narc] = j
+                    arc_x[slot, narc, :] = x
+                narc += 1
+            if not _all_finite(x):
+                return NONFINITE, j, nlog, narc
+
+
+@jit
+def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
+    """Hairer, Nørsett & Wanner (1993), II.4 (as ``_FastSolver._initial_step``)."""
+    n = N
+    remaining = t_end - t
+    d0 = 0.0
+    d1 = 0.0
+    for q in range(n):
+        sc = atol + rtol * abs(x[q])
+        d0 += (x[q] / sc) ** 2
+        d1 += (f[q] / sc) ** 2
+    d0 = np.sqrt(d0 / n)
+    d1 = np.sqrt(d1 / n)
+    if d0 < 1e-5 or d1 < 1e-5:
+        h0 = 1e-6
+    else:
+        h0 = 0.01 * d0 / d1
+    h0 = min(h0, max(remaining, 1e-12))
+    for q in range(n):
+        y[q] = x[q] + h0 * f[q]
+    flow(t + h0, y, p, args[0], args[1], f1)
+    d2 = 0.0
+    for q in range(n):
+        sc = atol + rtol * abs(x[q])
+        d2 += ((f1[q] - f[q]) / sc) ** 2
+    d2 = np.sqrt(d2 / n) / h0
+    big = max(d1, d2)
+    if big <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / big) ** (1.0 / (ERR_ORDER + 1))
+    h = min(min(100 * h0, h1), max_step)
+    if not (np.isfinite(h) and h > 0):
+        h = min(h0, max_step)
+    return h
+
+
+@jit
+def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
+    """Coefficients of the continuous extension (see ``Tableau.dense``)."""
+    n = N
+    if not DOP853:
+        # Dormand--Prince 5(4): Q[k] = h * sum_i P[i, k] K[i]
+        for k in range(NQ):
+            _comb(TDD[k], K, N_STAGES + 1, dy)
+            for q in range(n):
+                Q[k, q] = h * dy[q]
+        return
+    for r in range(N_EXTRA):
+        mm = N_STAGES + 1 + r
+        _comb(TDA[r], K, mm, dy)
+        for q in range(n):
+            y[q] = x[q] + h * dy[q]
+        flow(t + TDC[r] * h, y, p, args[0], args[1], K[mm])
+    for q in range(n):
+        d = x_new[q] - x[q]
+        Q[0, q] = d
+        Q[1, q] = h * K[0, q] - d
+        Q[2, q] = 2.0 * d - h * (K[N_STAGES, q] + K[0, q])
+    for r in range(NQ - 3):
+        _comb(TDD[r], K, N_STAGES + 1 + N_EXTRA, dy)
+        for q in range(n):
+            Q[3 + r, q] = h * dy[q]
+
+
+@jit
+def _guard_at(args, p, t0, h, x0, Q, nq, dop853, theta, xs, out):
+    _dense_eval(Q, nq, dop853, x0, theta, xs)
+    guard(t0 + theta * h, xs, p, args[0], args[1], out)
+
+
+@jit
+def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs, xtol_t):
+    """θ of the first event in the step, or NaN (see ``_FastSolver._locate``)."""
+    m = g0.shape[0]
+    # samples θ = i/S (i = 1..S-1), then the end θ = 1, then maybe the peak probe
+    ns = 0
+    for i in range(1, S):
+        th_s[ns] = i / S
+        _guard_at(args, p, t0, h, x0, Q, nq, dop853, th_s[ns], xs, gs[ns])
+        ns += 1
+    th_s[ns] = 1.0
+    for k in range(m):
+        gs[ns, k] = g1[k]
+    ns += 1
+    if S > 1:
+        probe = _peak_probe(g0, gs, ns, S)
+        if np.isfinite(probe):
+            # insert the probe in θ order (stable: after equal θ)
+            pos = ns
+            while pos > 0 and th_s[pos - 1] > probe:
+                pos -= 1
+            for i in range(ns, pos, -1):
+                th_s[i] = th_s[i - 1]
+                for k in range(m):
+                    gs[i, k] = gs[i - 1, k]
+            th_s[pos] = probe
+            _guard_at(args, p, t0, h, x0, Q, nq, dop853, probe, xs, gs[pos])
+            ns += 1
+    # first sample with any g >= 0
+    first = -1
+    for i in range(ns):
+        if _any_nonneg(gs[i]):
+            first = i
+            break
+    if first < 0:
+        return np.nan
+    lo = 0.0 if first == 0 else th_s[first - 1]
+    hi = th_s[first]
+    for k in range(m):
+        gl[k] = g0[k] if first == 0 else gs[first - 1, k]
+    xtol = max(xtol_t / h, 4 * EPS)
+    best = np.inf
+    for k in range(m):
+        if gl[k] < 0.0 and gs[first, k] >= 0.0:
+            root = _bracket_root(
+                args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, gl[k], gs[first, k], xtol, xs, gtmp
+            )
+            if root < best:
+                best = root
+    if best == np.inf:
+        return np.nan
+    return best
+
+
+@jit
+def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol, xs, gtmp):
+    """Scalar version of :func:`etobs.hybrid.rootfind.bracket_root`; returns the right end."""
+    side = 0
+    width_before = hi - lo
+    for it in range(MAX_ROOT_ITER):
+        w = hi - lo
+        if not (w > xtol):
+            break
+        x = hi - f_hi * w / (f_hi - f_lo)
+        bisect = (not np.isfinite(x)) or (it % 2 == 1 and w > 0.5 * width_before)
+        if bisect:
+            x = 0.5 * (lo + hi)
+        half = min(0.5 * xtol, 0.5 * w)
+        x = min(max(x, lo + half), hi - half)
+        if it % 2 == 0:
+            width_before = w
+        _guard_at(args, p, t0, h, x0, Q, nq, dop853, x, xs, gtmp)
+        fx = gtmp[k]
+        if fx >= 0:
+            if side == 1:
+                f_lo *= 0.5
+            hi = x
+            f_hi = fx
+            side = 1
+        else:
+            if side == -1:
+                f_hi *= 0.5
+            lo = x
+            f_lo = fx
+            side = -1
+    return hi
+
+
+@jit
+def _comb(w, K, nstage, out):
+    """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
+    for i in range(N):
+        out[i] = 0.0
+    for k in range(nstage):
+        wk = w[k]
+        if wk != 0.0:
+            for i in range(N):
+                out[i] += wk * K[k, i]
