@@ -15,9 +15,11 @@ functions are numba-compiled functions of one run (not batched):
 ``p`` is the run's own parameter vector (row of ``params``), so runs with different
 parameters share one compiled kernel; ``args`` is one value shared by all runs (a
 tuple of arrays, say; read it, do not write it); ``work`` is a scratch array of
-``n_work`` floats owned by the run, so that the functions need not allocate. The algorithm, options and results are those of
-:func:`etobs.hybrid.solve` (see the contract in :mod:`etobs.hybrid.solver`); the two
-agree to the integration tolerance (tests compare them and the scipy reference).
+``n_work`` floats owned by the run, so that the functions need not allocate.
+
+The algorithm, options and results are those of :func:`etobs.hybrid.solve` (see the
+contract in :mod:`etobs.hybrid.solver`); the two agree to the integration tolerance
+(tests compare them and the scipy reference).
 
 Compilation happens once per process and per set of functions (a few seconds); the
 first call pays it.
@@ -25,6 +27,7 @@ first call pays it.
 
 from __future__ import annotations
 
+import itertools
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -275,7 +278,7 @@ def _call(
     parallel: bool,
 ) -> tuple[np.ndarray, ...]:
 
-    B, n = x.shape
+    n = x.shape[1]
     fopt = np.array(
         [opts.rtol, opts.atol, opts.max_step, opts.first_step or 0.0, opts.event_xtol], dtype=float
     )
@@ -325,7 +328,7 @@ def _call(
     # Buffer rows are per slice, so every slice gets its own views.
     cuts = np.linspace(0, R, min(threads, R) + 1).astype(int) if R else np.zeros(1, int)
     jobs = []
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+    for a, b in itertools.pairwise(cuts):
         views = (
             rest[:7]
             + tuple(buf[a:b] for buf in rest[7:10])
