@@ -14,7 +14,7 @@ from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solver import solve
 
-BACKENDS = ("fast", "scipy")
+BACKENDS = ("fast", "scipy", "numba")
 
 
 def simulate(
@@ -48,8 +48,10 @@ def simulate(
         Solver settings (tolerances, jump limit, event sampling).
     save : SaveAt, optional
         What to keep: full arcs (default) and/or states on a time grid.
-    backend : {"fast", "scipy"}
-        The batched solver, or the ``solve_ivp`` reference used for cross-checks.
+    backend : {"fast", "scipy", "numba"}
+        The batched numpy solver; the ``solve_ivp`` reference used for cross-checks; or
+        the compiled solver (optional numba; needs the plant's and observer's ``jit``
+        functions, see :mod:`etobs.estimation.compiled`), the fastest for many runs.
 
     Returns
     -------
@@ -77,8 +79,15 @@ def simulate(
     Z0 = _broadcast("z0", np.zeros(o.n_z) if z0 is None else z0, o.n_z, B)
     E0 = _broadcast("e0", np.zeros(p.n_y) if e0 is None else e0, p.n_y, B)
     q0 = problem.initial_state(X0, Z0, E0, t0)
-    solver = solve if backend == "fast" else solve_reference
-    sol = solver(problem.hybrid_system(), q0, (t0, t_end), options=options, save=save)
+    if backend == "numba":
+        from etobs.estimation.compiled import compile_problem
+        from etobs.hybrid.compiled import solve_compiled
+
+        cp = compile_problem(problem)
+        sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=save)
+    else:
+        solver = solve if backend == "fast" else solve_reference
+        sol = solver(problem.hybrid_system(), q0, (t0, t_end), options=options, save=save)
     return EstimationResult(problem=problem, solution=sol)
 
 

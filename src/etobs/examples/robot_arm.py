@@ -16,7 +16,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.estimation.problem import EstimationProblem
-from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sinusoid
+from etobs.model import DynamicRule, JitObserver, JitPlant, Linear, Node, Observer, Plant, Quadratic, Sinusoid
 
 A = np.array(
     [
@@ -103,8 +103,9 @@ def robot_arm(
         # eq. (57) run on the held outputs: xhat' = A xhat + B u + G σ(H xhat) + L (ybar - C xhat)
         return _model(t, z, u) + _matvec(gain, ybar - yhat)
 
-    plant = Plant(f_p=f_p, h=lambda x: x[:, :2], n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
-    observer = Observer(f_o=f_o, n_z=4, name="polytopic Luenberger")
+    jit_plant, jit_observer = _jit(gain)
+    plant = Plant(f_p=f_p, h=lambda x: x[:, :2], n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm", jit=jit_plant)
+    observer = Observer(f_o=f_o, n_z=4, name="polytopic Luenberger", jit=jit_observer)
     params = {
         k: _pair(k, val) for k, val in dict(sigma=sigma, c=c, b=b, a=a, ell=ell, eps=eps, eta0=eta0).items()
     }
@@ -132,6 +133,17 @@ def robot_arm(
         v=Sinusoid(amplitude=amp_v, omega=0.4),
         m=Sinusoid(amplitude=amp_m, omega=0.3),
     )
+
+
+def _jit(gain: np.ndarray) -> tuple[JitPlant | None, JitObserver | None]:
+    """Compiled versions of the model for ``backend="numba"`` (when numba is installed)."""
+    from etobs.hybrid.compiled import numba_available
+
+    if not numba_available():
+        return None, None
+    from etobs.examples import _robot_arm_jit as jit
+
+    return JitPlant(f_p=jit.f_p, h=jit.h), JitObserver(f_o=jit.f_o, theta=gain.ravel())
 
 
 def random_initial_states(n: int, seed: int | np.random.Generator | None = 0) -> np.ndarray:
@@ -176,8 +188,17 @@ def robot_arm_network(n_arms: int, **rule: Any) -> EstimationProblem:
         return np.concatenate(parts, axis=1)
 
     n = 4 * n_arms
-    plant = Plant(f_p=f_p, h=lambda x: x[:, outs], n_x=n, n_y=2 * n_arms, n_u=1, n_v=n, name="robot arms")
-    observer = Observer(f_o=f_o, n_z=n, name="polytopic Luenberger (per arm)")
+    plant = Plant(
+        f_p=f_p,
+        h=lambda x: x[:, outs],
+        n_x=n,
+        n_y=2 * n_arms,
+        n_u=1,
+        n_v=n,
+        name="robot arms",
+        jit=one.plant.jit,
+    )
+    observer = Observer(f_o=f_o, n_z=n, name="polytopic Luenberger (per arm)", jit=one.observer.jit)
     nodes = tuple(
         Node(outputs=(2 * k + i,), rule=one.nodes[i].rule, name=f"arm {k + 1} sensor {i + 1}")
         for k in range(n_arms)

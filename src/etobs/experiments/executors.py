@@ -8,6 +8,7 @@ the executor.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -78,12 +79,17 @@ def _process(
                 on_error(task, f"the worker process running this chunk died {attempt} times in a row")
 
 
+def _worker_init() -> None:
+    """Pool workers are the parallelism: the compiled backend runs one thread in each."""
+    os.environ["NUMBA_NUM_THREADS"] = "1"
+
+
 def _pool_round(
     tasks: list[Task], raw: dict[str, Any], on_done: Done, on_error: Failed, workers: int | None, ctx: Any
 ) -> list[Task]:
     """Run ``tasks`` on a fresh pool; return those lost because a worker died."""
     lost: list[Task] = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
         futures = {pool.submit(run_task, raw, t): t for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]

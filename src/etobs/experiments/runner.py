@@ -45,7 +45,14 @@ def run_task(raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
     hi = min(hi, spec.t_end)
     step = spec.metrics.error_grid_step
     grid = np.arange(lo, hi + step / 2, step) if hi >= lo else np.array([spec.t_end])
-    res = simulate(problem, x0, spec.t_end, options=spec.options, save=SaveAt(steps=False, grid=grid))
+    res = simulate(
+        problem,
+        x0,
+        spec.t_end,
+        options=spec.options,
+        save=SaveAt(steps=False, grid=grid),
+        backend=spec.backend,
+    )
     counts = transmission_counts(res, spec.metrics.transmissions_window)
     errors = max_estimation_error(res, (lo, hi)) if hi >= lo else np.full(len(task.runs), np.nan)
     mins = min_inter_event_time(res)

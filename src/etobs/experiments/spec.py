@@ -24,6 +24,9 @@ A spec is data, usually a TOML file (see ``examples/table1.toml``)::
     error_grid_step = 0.001
     [solver]                       # any SolverOptions field
     rtol = 1e-10
+    [execution]
+    chunk_size = 100               # runs solved together
+    backend = "auto"               # "numba" when installed, else "fast"; or "scipy"
 
 Every key is checked: unknown keys are rejected and a wrong value names its key.
 """
@@ -41,6 +44,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.hybrid.options import SolverOptions
 
+SWEEP_BACKENDS = ("auto", "fast", "numba", "scipy")
 _SOLVER_KEYS = {
     "method",
     "rtol",
@@ -176,6 +180,20 @@ class SweepSpec:
     raw: dict[str, Any] = field(repr=False, compare=False)
 
     @property
+    def backend(self) -> str:
+        """The solver backend: ``execution.backend``, with ``"auto"`` resolved.
+
+        ``"auto"`` is the compiled ``"numba"`` backend when numba is installed and the
+        system provides compiled functions, else ``"fast"``.
+        """
+        chosen = self.raw.get("execution", {}).get("backend", "auto")
+        if chosen != "auto":
+            return str(chosen)
+        from etobs.experiments.systems import supports_numba
+
+        return "numba" if supports_numba(self) else "fast"
+
+    @property
     def options(self) -> SolverOptions:
         """The solver settings as :class:`SolverOptions`."""
         return SolverOptions(**self.solver)
@@ -215,6 +233,7 @@ class SweepSpec:
                 "t_end": self.t_end,
                 "metrics": [m.transmissions_window, m.error_window, m.error_grid_step],
                 "solver": self.options.__dict__,
+                "backend": self.backend,
             }
         )
 
@@ -301,9 +320,11 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         SolverOptions(**solver)
     except InputError as exc:
         raise SpecError(f"`solver`: {exc}") from exc
-    execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size"})
+    execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size", "backend"})
     if "chunk_size" in execution:
         _number("execution.chunk_size", execution["chunk_size"], lower=1, integer=True)
+    if execution.get("backend", "auto") not in SWEEP_BACKENDS:
+        raise SpecError(f"`execution.backend` must be one of {SWEEP_BACKENDS}; got {execution['backend']!r}")
     _check_names(rows, scenarios, fixed)
     return SweepSpec(
         name=name,

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples import robot_arm
 from etobs.experiments.spec import SpecError, SweepSpec
@@ -87,3 +88,18 @@ def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem
             f"the factory {spec.factory!r} returned {type(problem).__name__}, not an EstimationProblem"
         )
     return problem
+
+
+def supports_numba(spec: SweepSpec) -> bool:
+    """Whether the compiled backend can run this spec's system (numba installed, jit given)."""
+    from etobs.hybrid.compiled import numba_available
+
+    if not numba_available() or not spec.rows or not spec.scenarios:
+        return False
+    from etobs.estimation.compiled import compile_problem
+
+    try:
+        compile_problem(build_problem(spec, 0, 0))
+    except InputError:
+        return False
+    return True

@@ -2,8 +2,8 @@
 
 from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
 from etobs.model.node import Node
-from etobs.model.observer import Observer, luenberger
-from etobs.model.plant import Plant
+from etobs.model.observer import JitObserver, Observer, luenberger
+from etobs.model.plant import JitPlant, Plant
 from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule, TriggerRule
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
@@ -12,6 +12,8 @@ __all__ = [
     "Custom",
     "DynamicRule",
     "FunctionSignal",
+    "JitObserver",
+    "JitPlant",
     "KFunction",
     "Linear",
     "Node",
