@@ -72,6 +72,10 @@ def test_with_runs_and_seed():
         ({"rows": []}, r"`rows` must be a non-empty array of tables"),
         ({"system": {"factory": 3}}, r"`system.factory` must be a string; got 3"),
         ({"execution": {"workers": 3}}, r"unknown key `execution.workers`"),
+        (
+            {"execution": {"backend": "gpu"}},
+            r"`execution.backend` must be one of \('auto', 'fast', 'numba', 'scipy'\); got 'gpu'",
+        ),
     ],
 )
 def test_bad_specs_name_the_key(change, match):

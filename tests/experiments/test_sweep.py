@@ -4,6 +4,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from etobs.experiments import parse_spec, run_sweep
@@ -300,3 +301,36 @@ def test_unreachable_dask_scheduler_is_an_input_error(tiny, tmp_path):
     # Nothing listens on port 1 of the loopback address; the client gives up after 10 s.
     with pytest.raises(InputError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:1'"):
         run_sweep(tiny, tmp_path, executor="dask", scheduler="tcp://127.0.0.1:1", progress=False)
+
+
+def test_auto_backend_falls_back_to_fast_without_compiled_functions(tiny):
+    # the scalar test factory gives no jit functions
+    assert tiny.backend == "fast"
+
+
+def test_numba_backend_sweep_gives_the_fast_backend_counts(tmp_path):
+    pytest.importorskip("numba")
+
+    def spec(backend):
+        return parse_spec(
+            {
+                "name": "arm",
+                "system": {"factory": "robot_arm", "fixed": {}},
+                "rows": [{"eps": [10.0, 10.0]}, {"eps": [100.0, 100.0]}],
+                "initial_states": {"low": [0, 0, 0, 0], "high": [20, 10, 20, 10], "runs": 3, "seed": 1},
+                "horizon": {"t_end": 5.0},
+                "metrics": {
+                    "transmissions_window": [0.0, 5.0],
+                    "error_window": [4.0, 5.0],
+                    "error_grid_step": 0.01,
+                },
+                "execution": {"chunk_size": 2, "backend": backend},
+            }
+        )
+
+    assert spec("auto").backend == "numba"
+    fast = run_sweep(spec("fast"), tmp_path / "fast", executor="serial", progress=False)
+    ours = run_sweep(spec("numba"), tmp_path / "numba", executor="serial", progress=False)
+    assert [r["transmissions"] for r in ours.runs] == [r["transmissions"] for r in fast.runs]
+    errors = np.array([[a["error"], b["error"]] for a, b in zip(ours.runs, fast.runs, strict=True)])
+    np.testing.assert_allclose(errors[:, 0], errors[:, 1], rtol=1e-6)

@@ -6,8 +6,14 @@ import pytest
 numba = pytest.importorskip("numba")
 
 from etobs.errors import InputError, InputTypeError  # noqa: E402
-from etobs.hybrid import HybridSystem, SaveAt, SolverOptions, Status, solve  # noqa: E402
-from etobs.hybrid import _kernel  # noqa: E402
+from etobs.hybrid import (  # noqa: E402
+    HybridSystem,
+    SaveAt,
+    SolverOptions,
+    Status,
+    _kernel,
+    solve,
+)
 from etobs.hybrid import compiled as comp  # noqa: E402
 from etobs.hybrid.compiled import CompiledSystem, solve_compiled  # noqa: E402
 
