@@ -23,6 +23,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
+	$(BIN)/python benchmarks/bench_scaling.py --quick --backend numba
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -32,6 +33,7 @@ test-fast: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_robot_arm.py
 	$(BIN)/python benchmarks/bench_scaling.py
+	$(BIN)/python benchmarks/bench_scaling.py --backend numba
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis

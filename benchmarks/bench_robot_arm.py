@@ -1,11 +1,14 @@
-"""Benchmark: robot-arm runs with the fast batched solver against the scipy backend.
+"""Benchmark: robot-arm runs with the fast and compiled solvers against the scipy backend.
 
-Both solvers simulate the paper's robot arm (section 7) from the same random initial
+The solvers simulate the paper's robot arm (section 7) from the same random initial
 states; the figure that matters is the per-run time ratio, measured in one process on
 the same runs (these machines are shared and noisy, so absolute times vary).
 
-    python benchmarks/bench_robot_arm.py            # 100 fast runs, 3 scipy runs, 30 s
+    python benchmarks/bench_robot_arm.py            # 100 fast/numba runs, 3 scipy runs, 30 s
     python benchmarks/bench_robot_arm.py --quick    # CI smoke: 10 fast, 1 scipy, 5 s
+
+The compiled (numba) backend is measured when numba is installed: its one-off compile
+time separately, then the same runs as the fast solver.
 """
 
 from __future__ import annotations
@@ -65,6 +68,30 @@ def main() -> None:
         f"scipy and fast agree on the shared runs: {same}, max event-time gap {worst:.2e} s"
     )
     print(f"statuses: {sorted(set(fast.status_labels()))}")
+    from etobs.hybrid.compiled import numba_available
+
+    if not numba_available():
+        print("numba backend: not installed (pip install 'etobs[numba]')")
+        return
+    _, t_compile = timed(lambda: simulate(pb, x0[:1], 0.01, options=opts, save=save, backend="numba"))
+    nb, t_nb = timed(lambda: simulate(pb, x0, t_end, options=opts, save=save, backend="numba"))
+    same_nb = np.array_equal(transmission_counts(nb), transmission_counts(fast))
+    gap = np.max(np.abs(nb.transmissions.t - fast.transmissions.t)) if same_nb else float("nan")
+    print(f"numba backend, compile once per process:  {t_compile:8.2f} s")
+    print(
+        f"numba backend, {runs} runs ({_threads()} threads): {t_nb:8.2f} s total, {t_nb / runs * 1e3:8.1f} ms/run"
+    )
+    print(
+        f"ratio fast/numba per run: {t_fast / t_nb:.1f}x; scipy/numba per run: "
+        f"{t_ref / ref_runs / (t_nb / runs):.1f}x"
+    )
+    print(f"numba and fast agree on all {runs} runs: {same_nb}, max event-time gap {gap:.2e} s")
+
+
+def _threads() -> int:
+    import numba
+
+    return numba.get_num_threads()
 
 
 if __name__ == "__main__":

@@ -1,12 +1,16 @@
-"""Benchmark: how the fast solver's cost grows with runs, horizon and number of nodes.
+"""Benchmark: how the solvers' cost grows with runs, horizon and number of nodes.
 
 Robot arm (section 7) with the paper's first parameter row, noise and disturbance;
 the N-node case uses `robot_arm_network` (N/2 independent arms, N sensor nodes).
 Times are measured in one process and reported with their ratio to the first entry
 of each series (these machines are shared: compare ratios, not seconds).
 
-    python benchmarks/bench_scaling.py          # runs 1..2600 (30 s), horizon 3..30 s, N 2..100
-    python benchmarks/bench_scaling.py --quick  # small sizes, for CI
+    python benchmarks/bench_scaling.py                    # runs 1..2600 (30 s), horizon 3..30 s, N 2..100
+    python benchmarks/bench_scaling.py --backend numba    # the compiled backend (numba installed)
+    python benchmarks/bench_scaling.py --quick            # small sizes, for CI
+
+With ``--backend numba`` each problem structure is compiled once before it is timed;
+the compile time is printed on its own line.
 """
 
 from __future__ import annotations
@@ -19,10 +23,16 @@ import numpy as np
 from etobs import SaveAt, simulate
 from etobs.examples import random_initial_states, robot_arm, robot_arm_network
 
+BACKEND = "fast"
+
 
 def timed(problem, x0, t_end):
+    if BACKEND == "numba":
+        start = time.perf_counter()
+        simulate(problem, x0[:1], 1e-3, save=SaveAt(steps=False), backend="numba")
+        print(f"  (compile or reuse for n = {x0.shape[1]}: {time.perf_counter() - start:.2f} s)")
     start = time.perf_counter()
-    res = simulate(problem, x0, t_end, save=SaveAt(steps=False))
+    res = simulate(problem, x0, t_end, save=SaveAt(steps=False), backend=BACKEND)
     elapsed = time.perf_counter() - start
     if not res.ok:
         raise RuntimeError(f"a run failed: {set(res.status_labels())}")
@@ -41,7 +51,11 @@ def series(title, label, points):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
+    parser.add_argument("--backend", choices=("fast", "numba"), default="fast", help="solver (default fast)")
     args = parser.parse_args()
+    global BACKEND
+    BACKEND = args.backend
+    print(f"backend: {BACKEND}")
     q = args.quick
     arm = robot_arm()
     x_all = random_initial_states(2600, seed=1)

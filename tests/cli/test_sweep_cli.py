@@ -1,3 +1,4 @@
+import json
 import re
 
 import pytest
@@ -128,3 +129,7 @@ def test_reproduce_table1_command(tmp_path, capsys):
     )
     assert len((tmp_path / "table1.csv").read_text().splitlines()) == 27
     assert "# Table 1 of the paper, reproduced" in (tmp_path / "table1.md").read_text()
+    from etobs.hybrid.compiled import numba_available
+
+    resolved = json.loads((tmp_path / "spec.json").read_text())["resolved"]
+    assert resolved["backend"] == ("numba" if numba_available() else "fast")

@@ -90,7 +90,7 @@ def test_other_problem_errors():
             r"`z0` has 3 runs but x0 has 2; give one row or 2 rows",
         ),
         ({"t_end": -1.0}, InputError, r"`t_end` must be >= t0 = 0; got -1"),
-        ({"backend": "rk4"}, InputError, r"`backend` must be one of \('fast', 'scipy'\); got 'rk4'"),
+        ({"backend": "rk4"}, InputError, r"`backend` must be one of \('fast', 'scipy', 'numba'\); got 'rk4'"),
         ({"e0": [0.0]}, InputError, r"`e0` has shape \(1,\); expected \(2,\)"),
     ],
 )

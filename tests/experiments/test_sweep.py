@@ -306,6 +306,8 @@ def test_unreachable_dask_scheduler_is_an_input_error(tiny, tmp_path):
 def test_auto_backend_falls_back_to_fast_without_compiled_functions(tiny):
     # the scalar test factory gives no jit functions
     assert tiny.backend == "fast"
+    assert tiny.with_backend("scipy").backend == "scipy"
+    assert tiny.with_backend("scipy").identity() != tiny.identity()
 
 
 def test_numba_backend_sweep_gives_the_fast_backend_counts(tmp_path):

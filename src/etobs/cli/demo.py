@@ -67,7 +67,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--no-noise", action="store_true", help="drop the measurement noise m")
     p.add_argument("--no-disturbance", action="store_true", help="drop the disturbance v")
-    p.add_argument("--backend", choices=("fast", "scipy"), default="fast", help="solver backend")
+    p.add_argument("--backend", choices=("fast", "scipy", "numba"), default="fast", help="solver backend")
     p.add_argument("--rtol", type=float, default=1e-10, help="relative and absolute tolerance")
     p.add_argument("--no-plots", action="store_true", help="write summary.json only")
     p.set_defaults(func=run_robot_arm)

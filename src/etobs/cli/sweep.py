@@ -37,6 +37,12 @@ def _execution_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=_positive_int, default=None, help="initial states per row (overrides spec)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial states (overrides spec)")
     p.add_argument(
+        "--backend",
+        choices=("auto", "fast", "numba", "scipy"),
+        default=None,
+        help="solver (overrides the spec's execution.backend; auto: numba when installed)",
+    )
+    p.add_argument(
         "--progress",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -67,6 +73,8 @@ def add_parsers(sub: Any) -> None:
 def _run(spec: Any, out: Path, args: argparse.Namespace) -> SweepResult:
     if args.runs is not None or args.seed is not None:
         spec = spec.with_runs(args.runs, args.seed)
+    if args.backend is not None:
+        spec = spec.with_backend(args.backend)
     executor = args.executor or ("dask" if args.scheduler else "process")
     if args.scheduler and executor != "dask":
         raise InputError(f"--scheduler needs --executor dask; got --executor {executor}")

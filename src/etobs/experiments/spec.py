@@ -184,7 +184,8 @@ class SweepSpec:
         """The solver backend: ``execution.backend``, with ``"auto"`` resolved.
 
         ``"auto"`` is the compiled ``"numba"`` backend when numba is installed and the
-        system provides compiled functions, else ``"fast"``.
+        system is a registered example (which provide compiled functions), else
+        ``"fast"``; a user factory with compiled functions asks for ``"numba"``.
         """
         chosen = self.raw.get("execution", {}).get("backend", "auto")
         if chosen != "auto":
@@ -210,6 +211,11 @@ class SweepSpec:
             raw["initial_states"]["runs"] = runs
         if seed is not None:
             raw["initial_states"]["seed"] = seed
+        return parse_spec(raw)
+
+    def with_backend(self, backend: str) -> SweepSpec:
+        """The same sweep solved with another backend (``execution.backend``)."""
+        raw = {**self.raw, "execution": {**self.raw.get("execution", {}), "backend": backend}}
         return parse_spec(raw)
 
     def identity(self) -> dict[str, Any]:

@@ -118,6 +118,7 @@ def run_sweep(
         "t_end": spec.t_end,
         "metrics": spec.metrics.__dict__,
         "solver": spec.options.__dict__,
+        "backend": spec.backend,
     }
     written = normalize({"as_given": spec.raw, "resolved": resolved}, ints_as_floats=False)
     atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")

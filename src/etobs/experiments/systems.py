@@ -9,7 +9,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples import robot_arm
 from etobs.experiments.spec import SpecError, SweepSpec
@@ -91,15 +90,13 @@ def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem
 
 
 def supports_numba(spec: SweepSpec) -> bool:
-    """Whether the compiled backend can run this spec's system (numba installed, jit given)."""
+    """Whether ``"auto"`` picks the compiled backend: numba is installed and the system is
+    a registered example (those provide compiled functions).
+
+    The driver never calls a user factory (it may be costly or fail; it runs in the
+    workers), so a user factory with compiled functions opts in with
+    ``execution.backend = "numba"``.
+    """
     from etobs.hybrid.compiled import numba_available
 
-    if not numba_available() or not spec.rows or not spec.scenarios:
-        return False
-    from etobs.estimation.compiled import compile_problem
-
-    try:
-        compile_problem(build_problem(spec, 0, 0))
-    except InputError:
-        return False
-    return True
+    return spec.factory in REGISTRY and numba_available()
