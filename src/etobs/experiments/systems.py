@@ -90,10 +90,10 @@ def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem
 
 
 def supports_numba(spec: SweepSpec) -> bool:
-    """Whether ``"auto"`` picks the compiled backend: numba is installed and the system is
-    a registered example (those provide compiled functions).
+    """Whether ``"auto"`` picks the compiled backend.
 
-    The driver never calls a user factory (it may be costly or fail; it runs in the
+    It does when numba is installed and the system is a registered example (those
+    provide compiled functions). The driver never calls a user factory (it may be costly or fail; it runs in the
     workers), so a user factory with compiled functions opts in with
     ``execution.backend = "numba"``.
     """
