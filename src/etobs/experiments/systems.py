@@ -93,9 +93,9 @@ def supports_numba(spec: SweepSpec) -> bool:
     """Whether ``"auto"`` picks the compiled backend.
 
     It does when numba is installed and the system is a registered example (those
-    provide compiled functions). The driver never calls a user factory (it may be costly or fail; it runs in the
-    workers), so a user factory with compiled functions opts in with
-    ``execution.backend = "numba"``.
+    provide compiled functions). The driver never calls a user factory (it may be
+    costly or fail; it runs in the workers), so a user factory with compiled functions
+    opts in with ``execution.backend = "numba"``.
     """
     from etobs.hybrid.compiled import numba_available
 
