@@ -56,19 +56,6 @@ I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS = 0, 1, 2, 3
 
 
 @numba.njit
-def _combine_into(w, K, nstage, out):
-    """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
-    n = out.shape[0]
-    for i in range(n):
-        out[i] = 0.0
-    for k in range(nstage):
-        wk = w[k]
-        if wk != 0.0:
-            for i in range(n):
-                out[i] += wk * K[k, i]
-
-
-@numba.njit
 def _dense_eval(Q, nq, dop853, x0, theta, out):
     """Continuous extension at ``theta`` (see ``Tableau.evaluate``)."""
     n = x0.shape[0]

@@ -198,6 +198,8 @@ def _solve_one(
         t,
         x,
         g,
+        f,
+        t_end,
         m,
         j,
         max_jumps,
@@ -214,12 +216,6 @@ def _solve_one(
         arc_j,
         arc_x,
     )
-    if st == RUNNING:
-        flow(t, x, p, args[0], args[1], f)
-        if t >= t_end:
-            st = COMPLETED
-        elif not _all_finite(f):
-            st = NONFINITE
     if st == RUNNING:
         if first_step > 0.0:
             h = first_step
@@ -322,6 +318,8 @@ def _solve_one(
                     t,
                     x,
                     g,
+                    f,
+                    t_end,
                     m,
                     j,
                     max_jumps,
@@ -338,12 +336,6 @@ def _solve_one(
                     arc_j,
                     arc_x,
                 )
-                if st == RUNNING:
-                    flow(t, x, p, args[0], args[1], f)
-                    if t >= t_end:
-                        st = COMPLETED
-                    elif not _all_finite(f):
-                        st = NONFINITE
             else:
                 for q in range(n):
                     f[q] = K[s, q]
@@ -371,6 +363,8 @@ def _jump_until_flow(
     t,
     x,
     g,
+    f,
+    t_end,
     m,
     j,
     max_jumps,
@@ -387,13 +381,15 @@ def _jump_until_flow(
     arc_j,
     arc_x,
 ):
-    """Apply jumps until every event function is negative; returns (status, j, nlog, narc)."""
-    if m == 0:
-        return RUNNING, j, nlog, narc
-    while True:
+    """Apply jumps until every event function is negative, then refresh ``f = flow(t, x)``.
+
+    Returns (status, j, nlog, narc); the status is ``completed`` at ``t_end`` and
+    ``nonfinite`` when the state or its derivative is not finite.
+    """
+    while m > 0:
         guard(t, x, p, args[0], args[1], g)
         if not _any_nonneg(g):
-            return RUNNING, j, nlog, narc
+            break
         for k in range(m):
             if g[k] < 0.0:
                 continue
@@ -414,6 +410,12 @@ def _jump_until_flow(
                 narc += 1
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
+    flow(t, x, p, args[0], args[1], f)
+    if t >= t_end:
+        return COMPLETED, j, nlog, narc
+    if not _all_finite(f):
+        return NONFINITE, j, nlog, narc
+    return RUNNING, j, nlog, narc
 
 
 @jit
