@@ -34,19 +34,18 @@ from typing import Any
 import numba
 import numpy as np
 
+from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
+from etobs.hybrid.status import Status
 from etobs.hybrid.tableau import TABLEAUS
 
-# Status codes: the values of etobs.hybrid.status.Status (checked by a test).
-RUNNING = -1
-COMPLETED = 0
-MAX_JUMPS = 1
-MAX_STEPS = 2
-NONFINITE = 3
-STEP_UNDERFLOW = 4
+# Status codes as plain integers (numba folds them as constants).
+RUNNING = int(Status.RUNNING)
+COMPLETED = int(Status.COMPLETED)
+MAX_JUMPS = int(Status.MAX_JUMPS)
+MAX_STEPS = int(Status.MAX_STEPS)
+NONFINITE = int(Status.NONFINITE)
+STEP_UNDERFLOW = int(Status.STEP_UNDERFLOW)
 
-SAFETY = 0.9
-MIN_FACTOR = 0.2
-MAX_FACTOR = 10.0
 MAX_ROOT_ITER = 200
 EPS = np.finfo(np.float64).eps
 

@@ -148,6 +148,7 @@ def _solve_one(
     err_exp = -1.0 / (ERR_ORDER + 1)
     n_grid = grid.shape[0]
 
+    buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x)
     # the user's shared data travels with this run's own workspace
     args = (args, np.empty(N_WORK))
     K = np.empty((s + 1 + n_extra, n))
@@ -209,12 +210,7 @@ def _solve_one(
         log_cap,
         arc_cap,
         slot,
-        log_rule,
-        log_t,
-        log_j,
-        arc_t,
-        arc_j,
-        arc_x,
+        buffers,
     )
     if st == RUNNING:
         if first_step > 0.0:
@@ -329,12 +325,7 @@ def _solve_one(
                     log_cap,
                     arc_cap,
                     slot,
-                    log_rule,
-                    log_t,
-                    log_j,
-                    arc_t,
-                    arc_j,
-                    arc_x,
+                    buffers,
                 )
             else:
                 for q in range(n):
@@ -374,18 +365,15 @@ def _jump_until_flow(
     log_cap,
     arc_cap,
     slot,
-    log_rule,
-    log_t,
-    log_j,
-    arc_t,
-    arc_j,
-    arc_x,
+    buffers,
 ):
     """Apply jumps until every event function is negative, then refresh ``f = flow(t, x)``.
 
     Returns (status, j, nlog, narc); the status is ``completed`` at ``t_end`` and
-    ``nonfinite`` when the state or its derivative is not finite.
+    ``nonfinite`` when the state or its derivative is not finite. ``buffers`` holds
+    the jump log and arc arrays ``(log_rule, log_t, log_j, arc_t, arc_j, arc_x)``.
     """
+    log_rule, log_t, log_j, arc_t, arc_j, arc_x = buffers
     while m > 0:
         guard(t, x, p, args[0], args[1], g)
         if not _any_nonneg(g):
