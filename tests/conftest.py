@@ -1,7 +1,8 @@
-"""Shared test settings: a deterministic hypothesis profile for CI."""
+"""Shared test settings: a deterministic hypothesis profile for CI, a fresh compile cache."""
 
 import os
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 settings.register_profile(
@@ -9,3 +10,16 @@ settings.register_profile(
 )
 settings.register_profile("dev", max_examples=60, deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _compile_cache(tmp_path_factory):
+    """A fresh compile cache for the session (hermetic), unless ETOBS_CACHE_DIR is set."""
+    if "ETOBS_CACHE_DIR" in os.environ:
+        yield
+        return
+    os.environ["ETOBS_CACHE_DIR"] = str(tmp_path_factory.mktemp("etobs-cache"))
+    try:
+        yield
+    finally:
+        os.environ.pop("ETOBS_CACHE_DIR", None)

@@ -1,9 +1,9 @@
 """Template of the compiled hybrid model (16)--(22); :mod:`etobs.estimation.compiled` runs it.
 
 Not imported as a module: the builder executes this text in a namespace holding the
-user's compiled plant and observer functions (``F_P``, ``H``, ``F_O``, ``PSI``,
-``HAS_PSI``), the decorator ``jit`` and the layout constants below, so numba inlines
-the user functions. Each function handles one run; it mirrors
+user's compiled plant and observer functions (``F_P``, ``H``, ``F_O`` and ``PSI``
+when ``HAS_PSI``), the decorator ``jit`` and the layout constants below, so numba
+inlines the user functions (see :mod:`etobs.hybrid._jitcache`). Each function handles one run; it mirrors
 :meth:`etobs.estimation.problem.EstimationProblem.hybrid_system` and the rule classes
 of :mod:`etobs.model.rules` operation for operation.
 
@@ -21,6 +21,12 @@ import numpy as np
 DYNAMIC, STATIC, PERIODIC = 0, 1, 2
 # per-node parameters, offsets from R0 + RS*i
 P_SIGMA, P_C, P_B, P_EPS, P_G1, P_G2, P_A1, P_A2, P_PERIOD = 0, 1, 2, 3, 4, 5, 6, 7, 8
+
+if not HAS_PSI:
+
+    @jit
+    def PSI(z, theta, out):
+        """Stand-in for an absent ``psi`` (never called: ``xhat = z``)."""
 
 
 @jit

@@ -23,6 +23,7 @@ import numpy as np
 
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
+from etobs.hybrid import _jitcache
 from etobs.hybrid.compiled import CompiledSystem, require_numba
 from etobs.model.functions import KFunction, Linear, Power, Quadratic
 from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule
@@ -169,26 +170,20 @@ def _rule_params(i: int, name: str, rule: Any) -> tuple[np.ndarray, tuple[int, i
 
 
 _CACHE: dict[tuple[Any, ...], dict[str, Any]] = {}
-_NO_PSI: list[Any] = []
-
-
-def _no_psi(numba: Any) -> Any:
-    """A compiled stand-in for an absent ``psi`` (never called: ``HAS_PSI`` is false)."""
-    if not _NO_PSI:
-        _NO_PSI.append(numba.njit(lambda z, theta, out: None))
-    return _NO_PSI[0]
-
-
 _LOCK = threading.Lock()
 
 
 def _functions(f_p: Any, h: Any, f_o: Any, psi: Any, sizes: dict[str, int]) -> dict[str, Any]:
-    """Compile the template for these user functions and sizes (memoized per process)."""
+    """Compile the template for these user functions and sizes (memoized per process).
+
+    The machine code is cached on disk when the user's functions can be imported by
+    name (see :mod:`etobs.hybrid._jitcache`).
+    """
     key = (id(f_p), id(h), id(f_o), id(psi), tuple(sorted(sizes.items())))
     with _LOCK:
         if key in _CACHE:
             return _CACHE[key]
-        numba = require_numba()
+        require_numba()
         nx, nz, ny, nu, nv = (sizes[k] for k in ("NX", "NZ", "NY", "NU", "NV"))
         tp1 = sizes["NTP"]
         to1 = tp1 + sizes["NTO"]
@@ -201,39 +196,35 @@ def _functions(f_p: Any, h: Any, f_o: Any, psi: Any, sizes: dict[str, int]) -> d
         wyh = wxh + nx
         wy = wyh + ny
         wm = wy + ny
-        namespace: dict[str, Any] = {
-            "__name__": "etobs.estimation._compiled_body_exec",
-            "jit": numba.njit,
-            "F_P": f_p,
-            "H": h,
-            "F_O": f_o,
-            "PSI": psi if psi is not None else _no_psi(numba),
-            "HAS_PSI": psi is not None,
-            "NX": nx,
-            "NZ": nz,
-            "NY": ny,
-            "NU": nu,
-            "NV": nv,
-            "Z0": nx,
-            "YB0": nx + nz,
-            "TP0": 0,
-            "TP1": tp1,
-            "TO0": tp1,
-            "TO1": to1,
-            "SU0": su0,
-            "SV0": sv0,
-            "SM0": sm0,
-            "R0": r0,
-            "RS": RS,
-            "WU": wu,
-            "WV": wv,
-            "WXH": wxh,
-            "WYH": wyh,
-            "WY": wy,
-            "WM": wm,
-        }
-        code = compile(_BODY.read_text(encoding="utf-8"), str(_BODY), "exec")
-        exec(code, namespace)
+        constants = dict(
+            HAS_PSI=psi is not None,
+            NX=nx,
+            NZ=nz,
+            NY=ny,
+            NU=nu,
+            NV=nv,
+            Z0=nx,
+            YB0=nx + nz,
+            TP0=0,
+            TP1=tp1,
+            TO0=tp1,
+            TO1=to1,
+            SU0=su0,
+            SV0=sv0,
+            SM0=sm0,
+            R0=r0,
+            RS=RS,
+            WU=wu,
+            WV=wv,
+            WXH=wxh,
+            WYH=wyh,
+            WY=wy,
+            WM=wm,
+        )
+        functions = {"F_P": f_p, "H": h, "F_O": f_o}
+        if psi is not None:
+            functions["PSI"] = psi
+        namespace = _jitcache.build("estimation", _BODY, constants, functions, {"jit": {}})
         out = {k: namespace[k] for k in ("est_flow", "est_guard", "est_jump")}
         out["n_work"] = wm + ny
         out["_keep"] = (f_p, h, f_o, psi)  # ids in the key stay valid

@@ -34,6 +34,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from etobs.hybrid import _jitcache
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
 from etobs.hybrid.tableau import TABLEAUS
@@ -142,20 +143,17 @@ def tableau_constants(method: str) -> dict[str, object]:
 def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) -> Any:
     """Compile the kernel for one set of user functions and one method.
 
-    The template's text runs in a fresh namespace where ``flow``, ``guard`` and
-    ``jump`` are globals, so numba treats them (and the tableau) as constants.
+    The template runs with ``flow``, ``guard`` and ``jump`` as globals, so numba treats
+    them (and the tableau) as constants; its machine code is cached on disk when the
+    functions can be imported by name (see :mod:`etobs.hybrid._jitcache`).
     """
-    namespace: dict[str, Any] = {
-        "__name__": f"etobs.hybrid._kernel_body_{method}",
-        "flow": flow,
-        "guard": guard,
-        "jump": jump,
-        "N": int(n),
-        "N_WORK": max(int(n_work), 1),
-        "jit": numba.njit,
-        "jit_nogil": numba.njit(nogil=True),
-        **tableau_constants(method),
-    }
-    code = compile(_BODY.read_text(encoding="utf-8"), str(_BODY), "exec")
-    exec(code, namespace)
+    here = Path(__file__).parent
+    namespace = _jitcache.build(
+        f"kernel_{method}",
+        _BODY,
+        {"N": int(n), "N_WORK": max(int(n_work), 1), **tableau_constants(method)},
+        {"flow": flow, "guard": guard, "jump": jump},
+        {"jit": {}, "jit_nogil": {"nogil": True}},
+        depends=tuple(here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py")),
+    )
     return namespace["_kernel"]
