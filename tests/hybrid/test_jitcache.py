@@ -58,7 +58,9 @@ def test_constants_are_written_exactly():
     exec("import numpy\n" + "\n".join(f"{k} = {_jitcache._literal(k, v)}" for k, v in values.items()), ns)
     assert np.array_equal(ns["A"], values["A"]) and ns["A"].dtype == np.float64
     assert ns["I"] == 7 and ns["F"] == 1 / 7 and ns["B"] is True and ns["INF"] == np.inf
-    with pytest.raises(TypeError, match="constant 'S' must be a bool, int, float or float64 array; got str"):
+    with pytest.raises(
+        TypeError, match="constant 'S' must be a bool, int, float or a float64 or int64 array; got str"
+    ):
         _jitcache._literal("S", "text")
 
 

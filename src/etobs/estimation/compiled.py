@@ -92,18 +92,17 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
         NTO=obs.jit.theta.size,
         N=lay.n,
     )
-    out_ptr = np.concatenate([[0], np.cumsum([len(nd.outputs) for nd in problem.nodes])]).astype(np.int64)
-    out_idx = np.concatenate(lay.outputs).astype(np.int64)
-    s_off = np.array([sl.start for sl in lay.rule], dtype=np.int64)
-    args = (
-        out_ptr,
-        out_idx,
-        np.array([k[0] for k in kinds], dtype=np.int64),
-        np.array([k[1] for k in kinds], dtype=np.int64),
-        np.array([k[2] for k in kinds], dtype=np.int64),
-        s_off,
+    # the problem's structure is compiled in (rows of a sweep share it)
+    structure = dict(
+        OUT_PTR=np.concatenate([[0], np.cumsum([len(nd.outputs) for nd in problem.nodes])]),
+        OUT_IDX=np.concatenate(lay.outputs),
+        RULE_KIND=np.array([k[0] for k in kinds]),
+        GAMMA_KIND=np.array([k[1] for k in kinds]),
+        ALPHA_KIND=np.array([k[2] for k in kinds]),
+        S_OFF=np.array([sl.start for sl in lay.rule]),
     )
-    fns = _functions(plant.jit.f_p, plant.jit.h, obs.jit.f_o, obs.jit.psi, sizes)
+    structure = {k: np.asarray(a, dtype=np.int64) for k, a in structure.items()}
+    fns = _functions(plant.jit.f_p, plant.jit.h, obs.jit.f_o, obs.jit.psi, sizes, structure)
     names = tuple(nd.name or f"node{i}" for i, nd in enumerate(problem.nodes))
     system = CompiledSystem(
         n=lay.n,
@@ -113,7 +112,6 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
         jump=fns["est_jump"],
         n_params=params.size,
         n_work=fns["n_work"],
-        args=args,
         rule_names=names,
     )
     return CompiledProblem(system=system, params=params)
@@ -173,13 +171,22 @@ _CACHE: dict[tuple[Any, ...], dict[str, Any]] = {}
 _LOCK = threading.Lock()
 
 
-def _functions(f_p: Any, h: Any, f_o: Any, psi: Any, sizes: dict[str, int]) -> dict[str, Any]:
+def _functions(
+    f_p: Any, h: Any, f_o: Any, psi: Any, sizes: dict[str, int], structure: dict[str, np.ndarray]
+) -> dict[str, Any]:
     """Compile the template for these user functions and sizes (memoized per process).
 
     The machine code is cached on disk when the user's functions can be imported by
     name (see :mod:`etobs.hybrid._jitcache`).
     """
-    key = (id(f_p), id(h), id(f_o), id(psi), tuple(sorted(sizes.items())))
+    key = (
+        id(f_p),
+        id(h),
+        id(f_o),
+        id(psi),
+        tuple(sorted(sizes.items())),
+        tuple((k, tuple(a.tolist())) for k, a in sorted(structure.items())),
+    )
     with _LOCK:
         if key in _CACHE:
             return _CACHE[key]
@@ -220,11 +227,20 @@ def _functions(f_p: Any, h: Any, f_o: Any, psi: Any, sizes: dict[str, int]) -> d
             WYH=wyh,
             WY=wy,
             WM=wm,
+            NN=int(structure["RULE_KIND"].size),
+            **structure,
         )
         functions = {"F_P": f_p, "H": h, "F_O": f_o}
         if psi is not None:
             functions["PSI"] = psi
-        namespace = _jitcache.build("estimation", _BODY, constants, functions, {"jit": {}})
+        namespace = _jitcache.build(
+            "estimation",
+            _BODY,
+            constants,
+            functions,
+            {"jit": {}, "jit_inline": {"inline": "always"}},
+            inline=True,
+        )
         out = {k: namespace[k] for k in ("est_flow", "est_guard", "est_jump")}
         out["n_work"] = wm + ny
         out["_keep"] = (f_p, h, f_o, psi)  # ids in the key stay valid

@@ -102,6 +102,7 @@ def build(
     functions: Mapping[str, Any],
     decorators: Mapping[str, Mapping[str, Any]],
     depends: tuple[Path, ...] = (),
+    inline: bool = False,
 ) -> Mapping[str, Any]:
     """Run ``template`` with ``constants``, ``functions`` and numba ``decorators`` as globals.
 
@@ -112,7 +113,7 @@ def build(
     template : Path
         The template's text.
     constants : mapping
-        Globals of type bool, int, float or float ndarray, written into the module as literals.
+        Globals of type bool, int, float or float64/int64 ndarray, written into the module as literals.
     functions : mapping
         Globals that are numba-compiled functions.
     decorators : mapping
@@ -120,6 +121,13 @@ def build(
     depends : tuple of Path
         Files whose text the compiled code depends on besides the template (their text
         is part of the cache key).
+    inline : bool
+        Inline ``functions`` into the template's functions at numba's IR level (their
+        Python code is compiled again as ``numba.njit(inline="always")``); the original
+        compiled function stays available as ``<name>_call``. A call to a separately
+        compiled function costs several nanoseconds; for functions called hundreds of
+        thousands of times per run, that is most of their cost. Every call site of an
+        inlined function gets a copy of its code, so keep their number small.
 
     Returns
     -------
@@ -130,10 +138,10 @@ def build(
     folder = cache_dir()
     if folder is not None and all(reference(fn) for fn in functions.values()):
         try:
-            return _generate(kind, template, constants, functions, decorators, depends, folder)
+            return _generate(kind, template, constants, functions, decorators, depends, inline, folder)
         except OSError as exc:
             _warn_once(f"etobs: cannot use the compile cache in {folder} ({exc}); compiling in memory")
-    return _generate(kind, template, constants, functions, decorators, depends, None)
+    return _generate(kind, template, constants, functions, decorators, depends, inline, None)
 
 
 def _generate(
@@ -143,6 +151,7 @@ def _generate(
     functions: Mapping[str, Any],
     decorators: Mapping[str, Mapping[str, Any]],
     depends: tuple[Path, ...],
+    inline: bool,
     folder: Path | None,
 ) -> Mapping[str, Any]:
     """:func:`build` with the cache in ``folder``, or in memory when ``folder`` is None."""
@@ -156,6 +165,12 @@ def _generate(
     if cached:
         lines.append("from etobs.hybrid._jitcache import resolve as _resolve")
         lines += [f"{name} = _resolve({ref!r})" for name, ref in refs.items()]
+    if not inline:
+        lines += [f"{name}_call = {name}" for name in functions]
+    if inline:
+        for name in functions:
+            lines.append(f"{name}_call = {name}")
+            lines.append(f"{name} = numba.njit(inline='always')({name}.py_func)")
     for name, kwargs in decorators.items():
         args = ", ".join(f"{k}={v!r}" for k, v in {**kwargs, "cache": cached}.items())
         lines.append(f"{name} = numba.njit({args})")
@@ -187,8 +202,12 @@ def _literal(name: str, value: Any) -> str:
     if isinstance(value, np.ndarray) and value.dtype == np.float64:
         flat = ", ".join(_float(x) for x in value.ravel())
         return f"numpy.array([{flat}], dtype=numpy.float64).reshape({value.shape!r})"
+    if isinstance(value, np.ndarray) and value.dtype == np.int64:
+        flat = ", ".join(repr(int(x)) for x in value.ravel())
+        return f"numpy.array([{flat}], dtype=numpy.int64).reshape({value.shape!r})"
     raise TypeError(
-        f"constant {name!r} must be a bool, int, float or float64 array; got {type(value).__name__}"
+        f"constant {name!r} must be a bool, int, float or a float64 or int64 array; "
+        f"got {type(value).__name__}"
     )
 
 

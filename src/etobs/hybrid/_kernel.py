@@ -55,24 +55,27 @@ F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
 I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS = 0, 1, 2, 3
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _dense_eval(Q, nq, dop853, x0, theta, out):
-    """Continuous extension at ``theta`` (see ``Tableau.evaluate``)."""
+    """Continuous extension at ``theta`` (see ``Tableau.evaluate``: same operations).
+
+    ``out`` is the accumulator; the loop over components is the inner one, so that it
+    vectorizes (the sampled event functions evaluate this on every step).
+    """
     n = x0.shape[0]
     one_minus = 1.0 - theta
     for i in range(n):
-        acc = 0.0
-        if dop853:
-            for r in range(nq):
-                acc += Q[nq - 1 - r, i]
-                acc *= theta if r % 2 == 0 else one_minus
-        else:
-            for r in range(nq):
-                acc = (acc + Q[nq - 1 - r, i]) * theta
-        out[i] = x0[i] + acc
+        out[i] = 0.0
+    for r in range(nq):
+        w = theta if (not dop853 or r % 2 == 0) else one_minus
+        row = nq - 1 - r
+        for i in range(n):
+            out[i] = (out[i] + Q[row, i]) * w
+    for i in range(n):
+        out[i] = x0[i] + out[i]
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _any_nonneg(g):
     for k in range(g.shape[0]):
         if g[k] >= 0.0:
@@ -80,7 +83,7 @@ def _any_nonneg(g):
     return False
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _all_finite(x):
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
@@ -153,7 +156,8 @@ def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) ->
         _BODY,
         {"N": int(n), "N_WORK": max(int(n_work), 1), **tableau_constants(method)},
         {"flow": flow, "guard": guard, "jump": jump},
-        {"jit": {}, "jit_nogil": {"nogil": True}},
+        {"jit": {}, "jit_inline": {"inline": "always"}, "jit_nogil": {"nogil": True}},
         depends=tuple(here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py")),
+        inline=True,
     )
     return namespace["_kernel"]

@@ -1,8 +1,10 @@
 """Template of the compiled solver kernel; :func:`etobs.hybrid._kernel.build` runs it.
 
 Not imported as a module: ``build`` executes this text in a namespace that holds the
-user's ``flow``, ``guard`` and ``jump``, the decorators ``jit``/``jit_nogil`` and the
-method's tableau as constants (``TA, TB, TC, TE, TE3, TDA, TDC, TDD, N_STAGES,
+user's ``flow``, ``guard`` and ``jump`` (inlined where they are called on every step;
+``flow_call``, ``guard_call`` and ``jump_call`` are the same functions, called, in the
+rarely run places), the decorators ``jit``/``jit_nogil`` and the method's tableau as
+constants (``TA, TB, TC, TE, TE3, TDA, TDC, TDD, N_STAGES,
 N_EXTRA, NQ, ERR_ORDER, DOP853``), so that numba inlines the user functions and folds
 the coefficients. The algorithm is documented in :mod:`etobs.hybrid._kernel`.
 """
@@ -225,15 +227,20 @@ def _solve_one(
         last = hh >= remaining
         for i in range(n):
             K[0, i] = f[i]
-        for i in range(1, s):
-            _comb(TA[i], K, i, dy)
+        # stages 1..s-1, then the new state and its derivative (FSAL) at stage s;
+        # one call site, because ``flow`` is inlined
+        for i in range(1, s + 1):
+            if i < s:
+                _comb(TA[i], K, i, dy)
+                ti = t + TC[i] * hh
+                yi = y
+            else:
+                _comb(TB, K, s, dy)
+                ti = t + hh
+                yi = x_new
             for q in range(n):
-                y[q] = x[q] + hh * dy[q]
-            flow(t + TC[i] * hh, y, p, args[0], args[1], K[i])
-        _comb(TB, K, s, dy)
-        for q in range(n):
-            x_new[q] = x[q] + hh * dy[q]
-        flow(t + hh, x_new, p, args[0], args[1], K[s])
+                yi[q] = x[q] + hh * dy[q]
+            flow(ti, yi, p, args[0], args[1], K[i])
         # error norm (see Tableau.error_norm)
         _comb(TE, K, s + 1, dy)
         e5 = 0.0
@@ -375,7 +382,7 @@ def _jump_until_flow(
     """
     log_rule, log_t, log_j, arc_t, arc_j, arc_x = buffers
     while m > 0:
-        guard(t, x, p, args[0], args[1], g)
+        guard_call(t, x, p, args[0], args[1], g)
         if not _any_nonneg(g):
             break
         for k in range(m):
@@ -383,7 +390,7 @@ def _jump_until_flow(
                 continue
             if j >= max_jumps:
                 return MAX_JUMPS, j, nlog, narc
-            jump(k, t, x, p, args[0], args[1])
+            jump_call(k, t, x, p, args[0], args[1])
             if nlog < log_cap:
                 log_rule[slot, nlog] = k
                 log_t[slot, nlog] = t
@@ -398,7 +405,7 @@ def _jump_until_flow(
                 narc += 1
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
-    flow(t, x, p, args[0], args[1], f)
+    flow_call(t, x, p, args[0], args[1], f)
     if t >= t_end:
         return COMPLETED, j, nlog, narc
     if not _all_finite(f):
@@ -426,7 +433,7 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
     h0 = min(h0, max(remaining, 1e-12))
     for q in range(n):
         y[q] = x[q] + h0 * f[q]
-    flow(t + h0, y, p, args[0], args[1], f1)
+    flow_call(t + h0, y, p, args[0], args[1], f1)
     d2 = 0.0
     for q in range(n):
         sc = atol + rtol * abs(x[q])
@@ -472,12 +479,6 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
 
 
 @jit
-def _guard_at(args, p, t0, h, x0, Q, nq, dop853, theta, xs, out):
-    _dense_eval(Q, nq, dop853, x0, theta, xs)
-    guard(t0 + theta * h, xs, p, args[0], args[1], out)
-
-
-@jit
 def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs, xtol_t):
     """θ of the first event in the step, or NaN (see ``_FastSolver._locate``)."""
     m = g0.shape[0]
@@ -485,7 +486,8 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
     ns = 0
     for i in range(1, S):
         th_s[ns] = i / S
-        _guard_at(args, p, t0, h, x0, Q, nq, dop853, th_s[ns], xs, gs[ns])
+        _dense_eval(Q, nq, dop853, x0, th_s[ns], xs)
+        guard(t0 + th_s[ns] * h, xs, p, args[0], args[1], gs[ns])
         ns += 1
     th_s[ns] = 1.0
     for k in range(m):
@@ -503,7 +505,8 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
                 for k in range(m):
                     gs[i, k] = gs[i - 1, k]
             th_s[pos] = probe
-            _guard_at(args, p, t0, h, x0, Q, nq, dop853, probe, xs, gs[pos])
+            _dense_eval(Q, nq, dop853, x0, probe, xs)
+            guard(t0 + probe * h, xs, p, args[0], args[1], gs[pos])
             ns += 1
     # first sample with any g >= 0
     first = -1
@@ -548,7 +551,8 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
         x = min(max(x, lo + half), hi - half)
         if it % 2 == 0:
             width_before = w
-        _guard_at(args, p, t0, h, x0, Q, nq, dop853, x, xs, gtmp)
+        _dense_eval(Q, nq, dop853, x0, x, xs)
+        guard(t0 + x * h, xs, p, args[0], args[1], gtmp)
         fx = gtmp[k]
         if fx >= 0:
             if side == 1:
@@ -565,7 +569,7 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
     return hi
 
 
-@jit
+@jit_inline
 def _comb(w, K, nstage, out):
     """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
     for i in range(N):
