@@ -30,12 +30,15 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=20, help="initial states per cell (default 20)")
     parser.add_argument("--rtol", type=float, nargs="+", default=[1e-10, 1e-9], help="tolerances under test")
     parser.add_argument("--reference", type=float, default=1e-12, help="reference tolerance (default 1e-12)")
+    parser.add_argument(
+        "--rows", type=int, nargs="+", default=None, help="Table 1 rows (0-based; default all)"
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
     args = parser.parse_args()
     spec = table1_spec()
     runs = 3 if args.quick else args.runs
     t_end = 5.0 if args.quick else spec.t_end
-    rows = range(2) if args.quick else range(len(spec.rows))
+    rows = range(2) if args.quick else (args.rows or range(len(spec.rows)))
     backend = "numba" if numba_available() else "fast"
     x0 = spec.initial_states.draw(runs)
     save = SaveAt(steps=False)
