@@ -64,6 +64,9 @@ def min_inter_event_time(result: EstimationResult) -> np.ndarray:
     return out
 
 
+_BLOCK_BYTES = 4 * 2**20
+
+
 def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
     """``max |x - xhat|`` over the save-grid points in ``window``, per run.
 
@@ -84,15 +87,20 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
     cols = np.flatnonzero((g.t >= lo) & (g.t <= hi))
     if not cols.size:
         raise InputError(f"the save grid has no point in the window [{lo:g}, {hi:g}]")
-    # only x and xhat = psi(z) on the window's points (a sweep keeps ~10^4 points per
-    # run); the grid is sorted, so the window is a slice and nothing is copied
+    # Only x and xhat = psi(z) on the window's points: the grid is sorted, so the
+    # window is a slice. A sweep keeps ~10^4 points per run, so runs are taken a few at
+    # a time: the temporaries stay small (big ones cost fresh pages on every call).
     lay, q = result.problem.layout, g.x[:, cols[0] : cols[-1] + 1]
-    with np.errstate(invalid="ignore"):
-        z = q[..., lay.z]
-        xhat = result.problem.psi(z.reshape(-1, z.shape[-1])).reshape(*z.shape[:-1], -1)
-        dx = q[..., lay.x] - xhat
-        err = np.sqrt(np.einsum("bgi,bgi->bg", dx, dx))
-        out = np.where(
-            np.all(np.isfinite(err), axis=1), np.max(np.nan_to_num(err, nan=-np.inf), axis=1), np.nan
-        )
+    block = max(1, _BLOCK_BYTES // (8 * q.shape[1] * q.shape[2]))
+    out = np.empty(q.shape[0])
+    for a in range(0, q.shape[0], block):
+        qb = q[a : a + block]
+        z = qb[..., lay.z]
+        with np.errstate(invalid="ignore"):
+            xhat = result.problem.psi(z.reshape(-1, z.shape[-1])).reshape(*z.shape[:-1], -1)
+            dx = qb[..., lay.x] - xhat
+            err = np.sqrt(np.einsum("bgi,bgi->bg", dx, dx))
+            out[a : a + block] = np.where(
+                np.all(np.isfinite(err), axis=1), np.max(np.nan_to_num(err, nan=-np.inf), axis=1), np.nan
+            )
     return out
