@@ -103,7 +103,6 @@ def build(
     decorators: Mapping[str, Mapping[str, Any]],
     depends: tuple[Path, ...] = (),
     inline: bool = False,
-    extra: str = "",
 ) -> Mapping[str, Any]:
     """Run ``template`` with ``constants``, ``functions`` and numba ``decorators`` as globals.
 
@@ -129,8 +128,6 @@ def build(
         compiled function costs several nanoseconds; for functions called hundreds of
         thousands of times per run, that is most of their cost. Every call site of an
         inlined function gets a copy of its code, so keep their number small.
-    extra : str
-        Generated source appended to the template's text.
 
     Returns
     -------
@@ -141,16 +138,15 @@ def build(
     folder = cache_dir()
     if folder is not None and all(reference(fn) for fn in functions.values()):
         try:
-            return _generate(kind, template, extra, constants, functions, decorators, depends, inline, folder)
+            return _generate(kind, template, constants, functions, decorators, depends, inline, folder)
         except OSError as exc:
             _warn_once(f"etobs: cannot use the compile cache in {folder} ({exc}); compiling in memory")
-    return _generate(kind, template, extra, constants, functions, decorators, depends, inline, None)
+    return _generate(kind, template, constants, functions, decorators, depends, inline, None)
 
 
 def _generate(
     kind: str,
     template: Path,
-    extra: str,
     constants: Mapping[str, Any],
     functions: Mapping[str, Any],
     decorators: Mapping[str, Mapping[str, Any]],
@@ -178,7 +174,7 @@ def _generate(
     for name, kwargs in decorators.items():
         args = ", ".join(f"{k}={v!r}" for k, v in {**kwargs, "cache": cached}.items())
         lines.append(f"{name} = numba.njit({args})")
-    source = "\n".join(lines) + "\n\n" + template.read_text(encoding="utf-8") + "\n\n" + extra
+    source = "\n".join(lines) + "\n\n" + template.read_text(encoding="utf-8")
     if folder is not None:
         key = hashlib.sha256(source.encode())
         for ref in refs.values():

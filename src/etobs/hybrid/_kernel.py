@@ -143,50 +143,6 @@ def tableau_constants(method: str) -> dict[str, object]:
     }
 
 
-BLOCK = 8  # component loops: a multiple of this many, then the rest (so the first vectorizes)
-
-
-def combination_source(method: str, n: int) -> str:
-    """Text of the stage combinations ``sum_k w_k K[k]`` with the method's weights as literals.
-
-    One function per family of weight rows, each a chain of branches with one
-    straight sum per row: the zero weights are gone and, with the component loop cut
-    at a multiple of :data:`BLOCK`, the compiler vectorizes each sum (it leaves a
-    loop of 12, say, scalar). The sums are those
-    of the generic loop, term by term in stage order, so the numbers are unchanged.
-
-    * ``_stage_sum(i, K, out)``: row ``i = 1 .. s-1`` of ``a``, and ``b`` for ``i = s``;
-    * ``_err_sum(j, K, out)``: the error weights ``e`` (``j = 0``) and ``e_low`` (``j = 1``);
-    * ``_dense_sum(r, K, out)``: the extra dense-output stages (``r < N_EXTRA``), then the
-      rows of the dense-output coefficients.
-    """
-    c = tableau_constants(method)
-    s, n_extra = int(c["N_STAGES"]), int(c["N_EXTRA"])
-    stage = [(c["TA"][i], i) for i in range(1, s)] + [(c["TB"], s)]
-    err = [(c["TE"], s + 1), (c["TE3"], s + 1)]
-    width = s + 1 + n_extra if c["DOP853"] else s + 1
-    dense = [(c["TDA"][r], s + 1 + r) for r in range(n_extra)] + [(row, width) for row in c["TDD"]]
-    parts = [
-        _sum_function("_stage_sum", stage, first=1, n=n),
-        _sum_function("_err_sum", err, first=0, n=n),
-        _sum_function("_dense_sum", dense, first=0, n=n),
-    ]
-    return "\n\n".join(parts) + "\n"
-
-
-def _sum_function(name: str, rows: list[tuple[np.ndarray, int]], first: int, n: int) -> str:
-    lines = ["@jit_inline", f"def {name}(i, K, out):"]
-    cut = n - n % BLOCK
-    blocks = [(a, b) for a, b in ((0, cut), (cut, n)) if b > a]
-    for idx, (w, count) in enumerate(rows):
-        terms = [f"{float(w[k])!r} * K[{k}, q]" for k in range(count) if w[k] != 0.0] or ["0.0"]
-        lines.append(f"    {'if' if idx == 0 else 'elif'} i == {first + idx}:")
-        for a, b in blocks:
-            lines.append(f"        for q in range({a}, {b}):")
-            lines.append(f"            out[q] = {' + '.join(terms)}")
-    return "\n".join(lines)
-
-
 def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) -> Any:
     """Compile the kernel for one set of user functions and one method.
 
@@ -200,9 +156,8 @@ def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) ->
         _BODY,
         {"N": int(n), "N_WORK": max(int(n_work), 1), **tableau_constants(method)},
         {"flow": flow, "guard": guard, "jump": jump},
-        {"jit": {}, "jit_inline": {"inline": "always"}, "jit_nogil": {"nogil": True}},
+        {"jit": {}, "jit_nogil": {"nogil": True}},
         depends=tuple(here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py")),
         inline=True,
-        extra=combination_source(method, n),
     )
     return namespace["_kernel"]

@@ -1,11 +1,10 @@
 """Template of the compiled solver kernel; :func:`etobs.hybrid._kernel.build` runs it.
 
 Not imported as a module: ``build`` executes this text in a namespace that holds the
-user's ``flow``, ``guard`` and ``jump`` (inlined where they are called on every step;
-``flow_call``, ``guard_call`` and ``jump_call`` are the same functions, called, in the
-rarely run places), the decorators ``jit``/``jit_inline``/``jit_nogil``, the
-stage sums ``_stage_sum``, ``_err_sum``, ``_dense_sum`` written out for the method
-(:func:`etobs.hybrid._kernel.combination_source`) and the method's tableau as
+user's ``flow``, ``guard`` and ``jump`` (inlined: ``flow`` in the stages and the
+dense-output stages, ``guard`` at the samples of every step; ``flow_call``,
+``guard_call`` and ``jump_call`` are the same functions, called, everywhere else: each
+inlined call site adds to the compile time), the decorators ``jit``/``jit_nogil`` and the method's tableau as
 constants (``TA, TB, TC, TE, TE3, TDA, TDC, TDD, N_STAGES,
 N_EXTRA, NQ, ERR_ORDER, DOP853``), so that numba inlines the user functions and folds
 the coefficients. The algorithm is documented in :mod:`etobs.hybrid._kernel`.
@@ -232,25 +231,26 @@ def _solve_one(
         # stages 1..s-1, then the new state and its derivative (FSAL) at stage s;
         # one call site, because ``flow`` is inlined
         for i in range(1, s + 1):
-            _stage_sum(i, K, dy)
             if i < s:
+                _comb(TA[i], K, i, dy)
                 ti = t + TC[i] * hh
                 yi = y
             else:
+                _comb(TB, K, s, dy)
                 ti = t + hh
                 yi = x_new
             for q in range(n):
                 yi[q] = x[q] + hh * dy[q]
             flow(ti, yi, p, args[0], args[1], K[i])
         # error norm (see Tableau.error_norm)
-        _err_sum(0, K, dy)
+        _comb(TE, K, s + 1, dy)
         e5 = 0.0
         for q in range(n):
             sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
             dy[q] = dy[q] / sc
             e5 += dy[q] * dy[q]
         if dop853:
-            _err_sum(1, K, y)
+            _comb(TE3, K, s + 1, y)
             e3 = 0.0
             for q in range(n):
                 sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
@@ -284,7 +284,7 @@ def _solve_one(
             # ---- accepted step (see _FastSolver._accept) ----
             t_start = t
             t1 = t_end if last else t + hh
-            guard(t1, x_new, p, args[0], args[1], g1)
+            guard_call(t1, x_new, p, args[0], args[1], g1)
             have_q = m > 0 or n_grid > 0
             if have_q:
                 _dense_coeffs(args, p, t_start, x, x_new, K, hh, Q, y, dy)
@@ -458,13 +458,13 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
     if not DOP853:
         # Dormand--Prince 5(4): Q[k] = h * sum_i P[i, k] K[i]
         for k in range(NQ):
-            _dense_sum(k, K, dy)
+            _comb(TDD[k], K, N_STAGES + 1, dy)
             for q in range(n):
                 Q[k, q] = h * dy[q]
         return
     for r in range(N_EXTRA):
         mm = N_STAGES + 1 + r
-        _dense_sum(r, K, dy)
+        _comb(TDA[r], K, mm, dy)
         for q in range(n):
             y[q] = x[q] + h * dy[q]
         flow(t + TDC[r] * h, y, p, args[0], args[1], K[mm])
@@ -474,7 +474,7 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
         Q[1, q] = h * K[0, q] - d
         Q[2, q] = 2.0 * d - h * (K[N_STAGES, q] + K[0, q])
     for r in range(NQ - 3):
-        _dense_sum(N_EXTRA + r, K, dy)
+        _comb(TDD[r], K, N_STAGES + 1 + N_EXTRA, dy)
         for q in range(n):
             Q[3 + r, q] = h * dy[q]
 
@@ -507,7 +507,7 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
                     gs[i, k] = gs[i - 1, k]
             th_s[pos] = probe
             _dense_eval(Q, nq, dop853, x0, probe, xs)
-            guard(t0 + probe * h, xs, p, args[0], args[1], gs[pos])
+            guard_call(t0 + probe * h, xs, p, args[0], args[1], gs[pos])
             ns += 1
     # first sample with any g >= 0
     first = -1
@@ -553,7 +553,7 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
         if it % 2 == 0:
             width_before = w
         _dense_eval(Q, nq, dop853, x0, x, xs)
-        guard(t0 + x * h, xs, p, args[0], args[1], gtmp)
+        guard_call(t0 + x * h, xs, p, args[0], args[1], gtmp)
         fx = gtmp[k]
         if fx >= 0:
             if side == 1:
@@ -568,3 +568,15 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
             f_lo = fx
             side = -1
     return hi
+
+
+@jit
+def _comb(w, K, nstage, out):
+    """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
+    for i in range(N):
+        out[i] = 0.0
+    for k in range(nstage):
+        wk = w[k]
+        if wk != 0.0:
+            for i in range(N):
+                out[i] += wk * K[k, i]
