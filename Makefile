@@ -24,6 +24,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick --backend numba
+	$(BIN)/python benchmarks/bench_accuracy.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -34,6 +35,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_robot_arm.py
 	$(BIN)/python benchmarks/bench_scaling.py
 	$(BIN)/python benchmarks/bench_scaling.py --backend numba
+	$(BIN)/python benchmarks/bench_accuracy.py --runs 30 --rtol 1e-10 1e-9 1e-8
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis
