@@ -22,3 +22,7 @@ class InputTypeError(EtobsError, TypeError):
 
 class ModelError(InputError):
     """A user model function (plant, observer, rule) returned something unusable."""
+
+
+class DesignError(EtobsError):
+    """A design problem (LMI, parameter choice) has no solution, or the solver failed."""

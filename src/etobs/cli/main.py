@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from etobs import __version__
-from etobs.cli import demo, sweep
+from etobs.cli import check, demo, sweep
 from etobs.errors import InputError
 
 
@@ -20,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo.add_parser(sub)
     sweep.add_parsers(sub)
+    check.add_parser(sub)
     return parser
 
 

@@ -1,0 +1,165 @@
+"""``etobs check SPEC``: the certificate of a design (which conditions hold, what is guaranteed).
+
+The spec is a TOML file (or the name of a packaged one, ``robot_arm``)::
+
+    [system]                 # the event-triggered problem: its rules are certified
+    factory = "robot_arm"    # registered example or "module:function" / "file.py:function"
+    params = { sigma = [600.0, 800.0], eps = [10.0, 10.0] }
+
+    [observer]               # where the ISS gains come from (optional)
+    structure = "robot_arm"  # A, C and the slope vertices of a registered example, or
+    # A = [[...]], C = [[...]], G = [[...]], H = [[...]], slopes = [[-3.3, 3.3]]
+    L = "paper"              # "paper" (the example's printed gain), "design", or a matrix
+    c_v = 0.1                # split constants of the ISS gains (section 7)
+    c = [0.1, 0.1]
+
+    [guarantees]             # optional
+    E = [10.0, 25.0]         # bound on |dh_i/dx f_p|: a number or one per node; or
+    # E_estimate = { low = [0, 0, 0, 0], high = [20, 10, 20, 10], runs = 20, margin = 1.2 }
+    # (the largest rate seen on seeded runs from that box, times the margin: a lower
+    # estimate; also t_end = 30.0, seed = 0)
+    noise = [0.0, 0.01]      # bounds m_i of the measurement noise (section 6.2)
+    disturbance = 0.0283     # bound on |v| for the error bound
+    a_U = 0.15               # rate asked of Theorem 2 (default: 0.9 x the largest admissible)
+    d = [3000.0, 8000.0]     # d_i of U (default 2 d_i*)
+
+Exit status 0 when every condition holds, 1 when one fails (the report names it), 2 on
+bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from etobs.experiments.spec import SpecError, _keys
+from etobs.experiments.systems import resolve_factory
+
+PACKAGED = {"robot_arm": "robot_arm_check.toml"}
+
+
+def add_parser(sub: Any) -> None:
+    """Register ``etobs check``."""
+    p = sub.add_parser("check", help="certificate of a design: the theorems' conditions and guarantees")
+    p.add_argument("spec", metavar="SPEC", help=f"TOML file, or a packaged spec: {', '.join(PACKAGED)}")
+    p.add_argument("--json", action="store_true", help="print the certificate as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the problem and the ISS gains of the spec, certify, print; 1 if a condition fails."""
+    from etobs.design import certify
+
+    raw = _load(args.spec)
+    top = _keys("spec", raw, {"system"}, {"observer", "guarantees", "name"})
+    system = _keys("system", top["system"], {"factory"}, {"params"})
+    params = system.get("params", {})
+    if not isinstance(params, dict):
+        raise SpecError(f"`system.params` must be a table; got {type(params).__name__}")
+    problem = resolve_factory(system["factory"])(**params)
+    iss = _iss(top.get("observer"), problem) if "observer" in top else None
+    g = _keys(
+        "guarantees",
+        top.get("guarantees", {}),
+        set(),
+        {"E", "E_estimate", "noise", "disturbance", "a_U", "d"},
+    )
+    E = _estimate(problem, g["E_estimate"]) if "E_estimate" in g else g.get("E")
+    cert = certify(
+        problem,
+        iss,
+        d=g.get("d"),
+        a_U=g.get("a_U"),
+        E=E,
+        noise=g.get("noise"),
+        disturbance=float(g.get("disturbance", 0.0)),
+    )
+    print(cert.to_json() if args.json else cert.format())
+    if not cert.ok and not args.json:
+        for c in cert.failures():
+            where = "" if c.node is None else f"node {c.node}: "
+            print(f"etobs: condition failed: {where}{c.name} ({c.detail})", file=sys.stderr)
+    return 0 if cert.ok else 1
+
+
+def _load(name: str) -> dict[str, Any]:
+    if name in PACKAGED:
+        text = resources.files("etobs.design").joinpath("data", PACKAGED[name]).read_text()
+    else:
+        path = Path(name)
+        if not path.is_file():
+            raise SpecError(f"SPEC must be a TOML file or one of {', '.join(PACKAGED)}; got {name!r}")
+        text = path.read_text(encoding="utf-8")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
+
+
+def _iss(table: Any, problem: Any) -> Any:
+    from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
+
+    keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q"}
+    obs = _keys("observer", table, {"L", "c_v", "c"}, keys - {"L", "c_v", "c"})
+    if "structure" in obs:
+        structure = _STRUCTURES.get(obs["structure"])
+        if structure is None:
+            raise SpecError(
+                f"`observer.structure` must be one of {', '.join(_STRUCTURES)}; got {obs['structure']!r}"
+            )
+        A, C, verts, paper_L = structure()
+    else:
+        missing = [k for k in ("A", "C") if k not in obs]
+        if missing:
+            raise SpecError(f"missing key `observer.{missing[0]}` (or give `observer.structure`)")
+        A, C = np.asarray(obs["A"], float), np.asarray(obs["C"], float)
+        verts = slope_vertices(obs["G"], obs["H"], obs["slopes"]) if "G" in obs else ()
+        paper_L = None
+    Q = obs.get("Q")
+    if obs["L"] == "design":
+        gain = observer_gain(A, C, verts, Q=Q)
+    elif obs["L"] == "paper":
+        if paper_L is None:
+            raise SpecError("`observer.L` = 'paper' needs `observer.structure` (a registered example)")
+        gain = check_gain(A, C, paper_L, verts, Q=Q)
+    else:
+        gain = check_gain(A, C, obs["L"], verts, Q=Q)
+    nodes = [list(nd.outputs) for nd in problem.nodes]
+    return quadratic_iss_gains(gain, nodes, c_v=obs["c_v"], c=obs["c"])
+
+
+def _robot_arm_structure() -> tuple[Any, ...]:
+    from etobs.design import slope_vertices
+    from etobs.examples.robot_arm import L_PAPER, SECTOR, A, C, G
+
+    H = np.array([[0.0, 0.0, 1.0, 0.0]])  # sigma(Hx) = 3.3 sin(x_3)
+    return A, C, slope_vertices(G[:, None], H, [(-SECTOR, SECTOR)]), L_PAPER
+
+
+_STRUCTURES = {"robot_arm": _robot_arm_structure}
+
+
+def _estimate(problem: Any, table: Any) -> list[float]:
+    """``E`` per node: the largest ``|dy_i/dt|`` on seeded runs from a box, times a margin."""
+    from etobs.design.rates import estimate_output_rate
+
+    t = _keys("guarantees.E_estimate", table, {"low", "high"}, {"runs", "t_end", "seed", "margin"})
+    low, high = np.asarray(t["low"], float), np.asarray(t["high"], float)
+    if low.shape != (problem.plant.n_x,) or high.shape != low.shape or np.any(high < low):
+        raise SpecError(
+            f"`guarantees.E_estimate.low/high` must be {problem.plant.n_x} numbers each with low <= high; "
+            f"got {t['low']!r} and {t['high']!r}"
+        )
+    runs, t_end = int(t.get("runs", 20)), float(t.get("t_end", 30.0))
+    margin = float(t.get("margin", 1.2))
+    if runs < 1 or t_end <= 0 or margin < 1:
+        raise SpecError("`guarantees.E_estimate` needs runs >= 1, t_end > 0 and margin >= 1")
+    rng = np.random.default_rng(int(t.get("seed", 0)))
+    x0 = low + rng.uniform(size=(runs, low.size)) * (high - low)
+    return [margin * float(e) for e in estimate_output_rate(problem, x0, t_end, grid_step=1e-2)]

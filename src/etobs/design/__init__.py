@@ -1,0 +1,21 @@
+"""Observer design and the paper's guarantees: LMI gains, ISS gains, certificates."""
+
+from etobs.design.certificate import Certificate, Condition, NodeNumbers, certify
+from etobs.design.iss import QuadraticISS, even_split, quadratic_iss_gains
+from etobs.design.lmi import ObserverGain, check_gain, observer_gain, slope_vertices
+from etobs.design.rates import estimate_output_rate
+
+__all__ = [
+    "Certificate",
+    "Condition",
+    "NodeNumbers",
+    "ObserverGain",
+    "QuadraticISS",
+    "certify",
+    "check_gain",
+    "estimate_output_rate",
+    "even_split",
+    "observer_gain",
+    "quadratic_iss_gains",
+    "slope_vertices",
+]

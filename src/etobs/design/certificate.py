@@ -1,0 +1,310 @@
+"""What the paper's theorems guarantee for given triggering parameters (sections 4–6).
+
+:func:`certify` checks the conditions of Theorem 1 (``sigma_i c_i < 1``, ``d_i > d_i*``)
+and reports ``d_i*``, ``delta_i`` and ``nu``; for linear ``alpha`` and ``alpha_i`` it
+applies Theorem 2 (the decay rate ``a_U`` and the bound ``mu``); it gives the individual
+minimum inter-event time ``tau_i = gamma_i^{-1}(eps_i) / E`` (Theorem 3) for a bound
+``E`` on ``|dh_i/dx f_p|`` and checks the noise condition ``eps_i > gamma_i(2 m_i)``
+(section 6.2). The theorems take ``sigma_i* = sigma_i`` and ``c_i* = c_i`` here, the
+tightest choice.
+
+The numbers are in the units of the ``gamma_i`` the rules use. When the ISS gains of
+the observer are known and quadratic (:class:`~etobs.design.iss.QuadraticISS`,
+``gamma_i(s) = k_i s^2``) and the rules use ``ell_i s^2``, Assumption 1 holds for
+``V' = lambda V`` with ``lambda = min_i ell_i / k_i``: the same linear rate ``a``,
+``gamma'_i = lambda k_i <= ell_i`` and ``theta' = lambda theta`` (Remark 1, made
+quantitative by scaling ``V``). That turns ``mu`` into a bound on the estimation error:
+``|x - xhat|^2 <= V / lambda_min(P) <= U / (lambda lambda_min(P))``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from etobs import _validate as v
+from etobs.design.iss import QuadraticISS
+from etobs.errors import InputError
+from etobs.estimation.problem import EstimationProblem
+from etobs.model.functions import Linear, Quadratic
+from etobs.model.rules import DynamicRule, StaticRule
+
+#: Share of the largest admissible rate used by default for ``a_U`` (Theorem 2 needs
+#: ``a_i > a_U / (1 - sigma_i c_i)`` strictly; at the limit ``d_i`` is infinite).
+DEFAULT_RATE_SHARE = 0.9
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One condition of a theorem, for one node (``node is None``: the whole system)."""
+
+    name: str
+    holds: bool
+    detail: str
+    node: int | None = None
+
+
+@dataclass(frozen=True)
+class NodeNumbers:
+    """Theorem 1 and 3 numbers of one node (``nan`` where they do not apply)."""
+
+    node: int
+    sigma: float
+    c: float
+    eps: float
+    sigma_c: float
+    d_star: float
+    d: float
+    delta: float
+    tau: float
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The conditions checked and the numbers guaranteed; ``ok`` if every condition holds.
+
+    Attributes
+    ----------
+    conditions : tuple of Condition
+    nodes : tuple of NodeNumbers
+    nu : float
+        Theorem 1's ``nu = sum_i (1 + d_i c_i) eps_i`` (eq. (25) holds with it).
+    nu_inf : float
+        Its infimum over admissible ``d_i``: ``sum_i eps_i / (1 - sigma_i c_i)``.
+    scale : float
+        ``lambda`` of the module docstring (``nan`` without ISS gains).
+    a_U, mu : float
+        Theorem 2's rate and bound (``nan`` when it does not apply).
+    error_bound : float
+        Ultimate bound on ``|x - xhat|`` from Theorem 2 and the ISS gains, for the
+        disturbance bound given (``nan`` when not available).
+
+    """
+
+    conditions: tuple[Condition, ...]
+    nodes: tuple[NodeNumbers, ...]
+    nu: float
+    nu_inf: float
+    scale: float = math.nan
+    a_U: float = math.nan
+    mu: float = math.nan
+    error_bound: float = math.nan
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        """Whether every condition holds."""
+        return all(c.holds for c in self.conditions)
+
+    def failures(self) -> list[Condition]:
+        """The conditions that do not hold."""
+        return [c for c in self.conditions if not c.holds]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (NaN as ``None``), for ``--json``."""
+
+        def clean(obj: Any) -> Any:
+            if isinstance(obj, float) and not math.isfinite(obj):
+                return None
+            if isinstance(obj, dict):
+                return {k: clean(x) for k, x in obj.items()}
+            if isinstance(obj, list | tuple):
+                return [clean(x) for x in obj]
+            return obj
+
+        return clean({**asdict(self), "ok": self.ok})
+
+    def to_json(self) -> str:
+        """:meth:`to_dict` as JSON text."""
+        return json.dumps(self.to_dict(), indent=2)
+
+    def format(self) -> str:
+        """A human-readable report: each condition, then the guaranteed numbers."""
+        lines = ["conditions:"]
+        for c in self.conditions:
+            where = "" if c.node is None else f" [node {c.node}]"
+            lines.append(f"  {'OK  ' if c.holds else 'FAIL'} {c.name}{where}: {c.detail}")
+        lines.append("per node (Theorem 1 with sigma* = sigma, c* = c; Theorem 3):")
+        lines.append("  node  sigma*c     d*          d           delta       tau [s]")
+        for nd in self.nodes:
+            nums = (nd.d_star, nd.d, nd.delta)
+            lines.append(
+                f"  {nd.node:4d}  {nd.sigma_c:<10.4g}"
+                + "".join(f"{x:<12.4g}" for x in nums)
+                + f"{nd.tau:.4g}"
+            )
+        lines.append(f"nu = {self.nu:.6g} (infimum over d: {self.nu_inf:.6g})")
+        if math.isfinite(self.a_U):
+            lines.append(f"Theorem 2: a_U = {self.a_U:.6g}, mu = {self.mu:.6g}")
+        if math.isfinite(self.scale):
+            lines.append(f"V' = lambda V with lambda = {self.scale:.6g}")
+        if math.isfinite(self.error_bound):
+            lines.append(f"ultimate bound on |x - xhat|: {self.error_bound:.6g}")
+        lines += [f"note: {n}" for n in self.notes]
+        lines.append(
+            "certificate: " + ("all conditions hold" if self.ok else f"{len(self.failures())} failed")
+        )
+        return "\n".join(lines)
+
+
+def certify(
+    problem: EstimationProblem,
+    iss: QuadraticISS | None = None,
+    *,
+    d: Sequence[float] | None = None,
+    a_U: float | None = None,
+    E: float | Sequence[float] | None = None,
+    noise: Sequence[float] | None = None,
+    disturbance: float = 0.0,
+) -> Certificate:
+    """Check the theorems' conditions for the rules of ``problem`` and give the guarantees.
+
+    Parameters
+    ----------
+    problem : EstimationProblem
+        Its nodes must use :class:`DynamicRule` or :class:`StaticRule`.
+    iss : QuadraticISS, optional
+        The observer's ISS gains (needed for Theorem 2 and the error bound).
+    d : sequence of float, optional
+        ``d_i`` of ``U`` (eq. (24)); default ``2 d_i*`` (``1`` where ``d_i* = 0``).
+    a_U : float, optional
+        Decay rate asked of Theorem 2, in ``(0, a]``; default the largest admissible
+        times :data:`DEFAULT_RATE_SHARE`.
+    E : float or sequence of float, optional
+        Bound on ``|dh_i/dx f_p|`` along solutions, common or per node (the proof of
+        Theorem 3 uses node ``i``'s own bound; see
+        :func:`~etobs.design.rates.estimate_output_rate`).
+    noise : sequence of float, optional
+        Bounds ``m_i`` on each node's measurement noise (section 6.2).
+    disturbance : float
+        Bound on ``|v|`` used in the error bound.
+
+    """
+    if not isinstance(problem, EstimationProblem):
+        raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
+    rules = _rules(problem)
+    N = len(rules)
+    ds = None if d is None else [v.real(f"d[{i}]", di, lower=0.0, lower_open=True) for i, di in enumerate(d)]
+    if ds is not None and len(ds) != N:
+        raise InputError(f"`d` must have one value per node ({N}); got {len(ds)}")
+    Es = None
+    if E is not None:
+        Es = [v.real(f"E[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(_per_node(E, N))]
+        if len(Es) != N:
+            raise InputError(f"`E` must be one bound or one per node ({N}); got {len(Es)}")
+    v.real("disturbance", disturbance, lower=0.0)
+    conds: list[Condition] = []
+    nodes = []
+    nu = nu_inf = 0.0
+    for i, r in enumerate(rules):
+        sigma, c = (r.sigma, r.c) if isinstance(r, DynamicRule) else (0.0, 0.0)
+        sc = sigma * c
+        conds.append(Condition("sigma*c < 1 (Theorem 1)", sc < 1, f"sigma*c = {sigma:g}*{c:g} = {sc:.6g}", i))
+        if sc < 1:
+            d_star = sigma / (1 - sc)
+            di = ds[i] if ds is not None else (2 * d_star if d_star > 0 else 1.0)
+            conds.append(Condition("d > d* (Theorem 1)", di > d_star, f"d = {di:.6g}, d* = {d_star:.6g}", i))
+            delta = di - sigma * (1 + di * c)
+            nu += (1 + di * c) * r.eps
+            nu_inf += r.eps / (1 - sc)
+        else:  # no d_i can satisfy Theorem 1
+            d_star = di = delta = nu = nu_inf = math.nan
+        tau = float(r.gamma.inverse(r.eps)) / Es[i] if Es is not None else math.nan
+        nodes.append(NodeNumbers(i, sigma, c, r.eps, sc, d_star, di, delta, tau))
+        if noise is not None:
+            mi = v.real(f"noise[{i}]", noise[i], lower=0.0)
+            g2m = float(r.gamma(2 * mi))
+            conds.append(
+                Condition(
+                    "eps > gamma(2 m) (section 6.2)",
+                    r.eps > g2m,
+                    f"eps = {r.eps:g}, gamma(2m) = {g2m:.6g}",
+                    i,
+                )
+            )
+    if noise is not None and len(noise) != N:
+        raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
+    out = Certificate(conditions=tuple(conds), nodes=tuple(nodes), nu=nu, nu_inf=nu_inf)
+    if iss is None:
+        return out
+    return _with_iss(out, rules, iss, a_U, disturbance)
+
+
+def _per_node(value: Any, n: int) -> list[Any]:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return [value] * n
+    return list(value)
+
+
+def _rules(problem: EstimationProblem) -> list[Any]:
+    rules = []
+    for i, nd in enumerate(problem.nodes):
+        if not isinstance(nd.rule, DynamicRule | StaticRule):
+            raise InputError(
+                f"the theorems cover DynamicRule and StaticRule; node {i} ({nd.name!r}) has a "
+                f"{type(nd.rule).__name__}"
+            )
+        rules.append(nd.rule)
+    return rules
+
+
+def _with_iss(
+    cert: Certificate, rules: list[Any], iss: QuadraticISS, a_U: float | None, disturbance: float
+) -> Certificate:
+    from dataclasses import replace
+
+    N = len(rules)
+    if iss.n_nodes != N:
+        raise InputError(f"`iss` has gains for {iss.n_nodes} nodes; the problem has {N}")
+    conds = list(cert.conditions)
+    notes = list(cert.notes)
+    quad = all(isinstance(r.gamma, Quadratic) for r in rules)
+    scale = min(r.gamma.ell / k for r, k in zip(rules, iss.k, strict=True)) if quad else math.nan
+    conds.append(
+        Condition(
+            "rule gamma_i = ell_i s^2 with quadratic ISS gains (Remark 1)",
+            quad,
+            f"V' = lambda V, lambda = min_i ell_i / k_i = {scale:.6g}"
+            if quad
+            else "a rule gamma is not quadratic",
+        )
+    )
+    linear = all(isinstance(r.alpha, Linear) for r in rules if isinstance(r, DynamicRule))
+    if not (quad and linear):
+        notes.append("Theorem 2 needs linear alpha_i and quadratic gamma_i: not applied")
+        return replace(cert, conditions=tuple(conds), scale=scale, notes=tuple(notes))
+    if not math.isfinite(cert.nu):  # item (i) of Theorem 2 is Theorem 1's sigma_i c_i < 1
+        notes.append("Theorem 2 not applied: sigma_i c_i < 1 fails")
+        return replace(cert, conditions=tuple(conds), scale=scale, notes=tuple(notes))
+    limits = [r.alpha.a * (1 - r.sigma * r.c) for r in rules if isinstance(r, DynamicRule) and r.sigma > 0]
+    best = min([iss.a, *limits])
+    rate = DEFAULT_RATE_SHARE * best if a_U is None else v.real("a_U", a_U, lower=0.0, lower_open=True)
+    ok_rate = rate <= iss.a and all(rate < lim for lim in limits)
+    conds.append(
+        Condition(
+            "a_U <= a and a_i > a_U / (1 - sigma_i c_i) (Theorem 2)",
+            ok_rate,
+            f"a_U = {rate:.6g}, a = {iss.a:.6g}, limits a_i (1 - sigma_i c_i) = "
+            + ", ".join(f"{x:.6g}" for x in limits),
+        )
+    )
+    if not ok_rate:
+        return replace(cert, conditions=tuple(conds), scale=scale, notes=tuple(notes))
+    # item (iv): d_i = sigma_i (1 - sigma_i c_i - a_U / a_i)^(-1); static nodes need no d_i (take 0)
+    d2 = [
+        r.sigma / (1 - r.sigma * r.c - rate / r.alpha.a)
+        if isinstance(r, DynamicRule) and r.sigma > 0
+        else 0.0
+        for r in rules
+    ]
+    varsigma = max(di * (r.c if isinstance(r, DynamicRule) else 0.0) for di, r in zip(d2, rules, strict=True))
+    mu = (1 + varsigma) * sum(r.eps for r in rules) / rate
+    # in units of V' = scale V: theta' = scale k_v; |xi|^2 <= V / lambda_min(P) = V' / (scale lambda_min(P))
+    bound = math.sqrt((mu + scale * iss.k_v * disturbance**2 / rate) / (scale * iss.lambda_min_P))
+    notes.append("the error bound assumes no measurement noise (m = 0)")
+    return replace(
+        cert, conditions=tuple(conds), scale=scale, a_U=rate, mu=mu, error_bound=bound, notes=tuple(notes)
+    )

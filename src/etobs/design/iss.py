@@ -1,0 +1,146 @@
+"""ISS gains of a Luenberger observer from its quadratic Lyapunov function (section 7).
+
+With ``V(xi) = xi' P xi`` for the estimation error ``xi = x - xhat`` and
+``P A_cl,k + A_cl,k' P <= -Q`` at every vertex (:mod:`etobs.design.lmi`), the error of
+the observer fed with ``ybar = y + e`` obeys ``xi' = A_cl xi + v - sum_i L_i e_i``
+(``L_i``: the columns of ``L`` of node ``i``'s outputs). Young's inequality
+``2 |xi| r <= c |xi|^2 + r^2 / c`` on each cross term gives Assumption 1
+(eq. (12)) with, for any ``c_v, c_1, ..., c_N > 0`` with
+``lambda_min(Q) - c_v - sum_i c_i > 0``::
+
+    alpha(s)   = (lambda_min(Q) - c_v - sum_i c_i) / lambda_max(P) * s
+    theta(s)   = ||P||^2 / c_v * s^2
+    gamma_i(s) = ||P L_i||^2 / c_i * s^2
+
+which are the paper's gains (section 7).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.design.lmi import ObserverGain
+from etobs.errors import InputError
+
+
+@dataclass(frozen=True)
+class QuadraticISS:
+    """Assumption 1 with linear ``alpha`` and quadratic ``theta``, ``gamma_i`` (eq. (12)).
+
+    Attributes
+    ----------
+    a : float
+        ``alpha(s) = a s``.
+    k_v : float
+        ``theta(s) = k_v s^2``.
+    k : tuple of float
+        ``gamma_i(s) = k[i] s^2``, one per node.
+    lambda_min_P, lambda_max_P : float
+        Extreme eigenvalues of ``P`` (``lambda_min_P |xi|^2 <= V <= lambda_max_P |xi|^2``).
+
+    """
+
+    a: float
+    k_v: float
+    k: tuple[float, ...]
+    lambda_min_P: float
+    lambda_max_P: float
+
+    def __post_init__(self) -> None:
+        v.real("a", self.a, lower=0.0, lower_open=True)
+        v.real("k_v", self.k_v, lower=0.0)
+        for i, ki in enumerate(self.k):
+            v.real(f"k[{i}]", ki, lower=0.0, lower_open=True)
+        v.real("lambda_min_P", self.lambda_min_P, lower=0.0, lower_open=True)
+        v.real("lambda_max_P", self.lambda_max_P, lower=self.lambda_min_P)
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes ``N``."""
+        return len(self.k)
+
+
+def quadratic_iss_gains(
+    gain: ObserverGain,
+    nodes: Sequence[Sequence[int]],
+    *,
+    c_v: float,
+    c: Sequence[float],
+) -> QuadraticISS:
+    """The ISS gains of Assumption 1 from ``P``, ``L``, ``Q`` and the split constants.
+
+    Parameters
+    ----------
+    gain : ObserverGain
+        ``L``, ``P`` and ``Q`` (from :func:`~etobs.design.observer_gain` or
+        :func:`~etobs.design.check_gain`); it must pass its re-check.
+    nodes : sequence of sequence of int
+        Output indices of each node (node ``i`` uses the columns ``L[:, nodes[i]]``).
+    c_v : float
+        Share of ``lambda_min(Q)`` spent on the disturbance ``v`` (> 0).
+    c : sequence of float
+        Share spent on each node's network-induced error (> 0 each).
+
+    Raises
+    ------
+    InputError
+        When a constant is not positive, or ``lambda_min(Q) - c_v - sum(c) <= 0`` (the
+        message gives both numbers), or ``gain`` fails its re-check.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from etobs.design import check_gain
+    >>> g = check_gain([[-1.0]], [[1.0]], [[1.0]])
+    >>> iss = quadratic_iss_gains(g, [[0]], c_v=0.25, c=[0.25])
+    >>> round(iss.a * iss.lambda_max_P, 6)  # (lambda_min(Q) - c_v - c_1)
+    0.5
+
+    """
+    if not isinstance(gain, ObserverGain):
+        raise InputError(f"`gain` must be an ObserverGain; got {type(gain).__name__}")
+    if not gain.ok:
+        raise InputError(
+            f"`gain` does not pass its LMI re-check ({'; '.join(gain.notes) or 'residuals > 0'})"
+        )
+    v.real("c_v", c_v, lower=0.0, lower_open=True)
+    cs = [v.real(f"c[{i}]", ci, lower=0.0, lower_open=True) for i, ci in enumerate(c)]
+    if len(cs) != len(nodes):
+        raise InputError(f"`c` must have one constant per node ({len(nodes)}); got {len(cs)}")
+    n_y = gain.L.shape[1]
+    cols = []
+    for i, idx in enumerate(nodes):
+        ix = list(idx)
+        if not ix or any(not 0 <= j < n_y for j in ix):
+            raise InputError(f"`nodes[{i}]` must list output indices in 0..{n_y - 1}; got {ix}")
+        cols.append(ix)
+    lam_q = float(np.linalg.eigvalsh(gain.Q).min())
+    spare = lam_q - c_v - sum(cs)
+    if spare <= 0:
+        raise InputError(
+            f"the split constants must leave lambda_min(Q) - c_v - sum(c) > 0; got "
+            f"{lam_q:.6g} - {c_v:.6g} - {sum(cs):.6g} = {spare:.6g}"
+        )
+    eig_P = np.linalg.eigvalsh(gain.P)
+    norm_P = float(np.linalg.norm(gain.P, 2))
+    return QuadraticISS(
+        a=spare / float(eig_P.max()),
+        k_v=norm_P**2 / c_v,
+        k=tuple(
+            float(np.linalg.norm(gain.P @ gain.L[:, ix], 2)) ** 2 / ci
+            for ix, ci in zip(cols, cs, strict=True)
+        ),
+        lambda_min_P=float(eig_P.min()),
+        lambda_max_P=float(eig_P.max()),
+    )
+
+
+def even_split(gain: ObserverGain, n_nodes: int, share: float = 0.5) -> tuple[float, list[float]]:
+    """Split constants spending ``share`` of ``lambda_min(Q)`` evenly on ``v`` and the nodes."""
+    v.real("share", share, lower=0.0, upper=1.0, lower_open=True, upper_open=True)
+    part = share * float(np.linalg.eigvalsh(gain.Q).min()) / (n_nodes + 1)
+    return part, [part] * n_nodes

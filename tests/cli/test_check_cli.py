@@ -1,0 +1,68 @@
+import json
+
+import pytest
+
+pytest.importorskip("cvxpy")
+
+from etobs.cli.main import main
+
+SPEC = """
+[system]
+factory = "robot_arm"
+params = {{ sigma = [600.0, {sigma2}], c = [0.001, 0.001], eps = [10.0, 10.0] }}
+[observer]
+structure = "robot_arm"
+L = "paper"
+c_v = 0.1
+c = [0.1, 0.1]
+[guarantees]
+E = [10.0, 20.0]
+noise = [0.0, 0.01]
+"""
+
+
+def write(tmp_path, sigma2=800.0, extra=""):
+    path = tmp_path / "check.toml"
+    path.write_text(SPEC.format(sigma2=sigma2) + extra)
+    return str(path)
+
+
+def test_check_prints_the_certificate(tmp_path, capsys):
+    assert main(["check", write(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "OK   sigma*c < 1 (Theorem 1) [node 1]: sigma*c = 800*0.001 = 0.8" in out
+    assert "nu = 130" in out and "Theorem 2: a_U =" in out
+    assert "certificate: all conditions hold" in out
+
+
+def test_check_fails_naming_the_node_and_condition(tmp_path, capsys):
+    assert main(["check", write(tmp_path, sigma2=1200.0)]) == 1
+    captured = capsys.readouterr()
+    assert "FAIL sigma*c < 1 (Theorem 1) [node 1]: sigma*c = 1200*0.001 = 1.2" in captured.out
+    assert (
+        "etobs: condition failed: node 1: sigma*c < 1 (Theorem 1) (sigma*c = 1200*0.001 = 1.2)"
+        in captured.err
+    )
+    assert main(["check", write(tmp_path, sigma2=1200.0), "--json"]) == 1
+    data = json.loads(capsys.readouterr().out)
+    assert data["ok"] is False and data["nu"] is None
+    assert [c["node"] for c in data["conditions"] if not c["holds"]] == [1]
+
+
+def test_check_rejects_bad_specs(tmp_path, capsys):
+    bad = write(tmp_path).replace("check.toml", "check.toml")
+    (tmp_path / "check.toml").write_text(SPEC.format(sigma2=800.0).replace("c_v = 0.1", "c_v = 0.1\nfoo = 1"))
+    with pytest.raises(SystemExit) as exc:
+        main(["check", bad])
+    assert exc.value.code == 2
+    assert "unknown key `observer.foo`" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["check", str(tmp_path / "missing.toml")])
+    assert "SPEC must be a TOML file or one of robot_arm; got" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_packaged_robot_arm_check_estimates_E_and_passes(capsys):
+    assert main(["check", "robot_arm"]) == 0
+    out = capsys.readouterr().out
+    assert "certificate: all conditions hold" in out and "ultimate bound on |x - xhat|" in out

@@ -1,0 +1,150 @@
+"""ISS gains (section 7), the certificate of Theorems 1-3 and the noise condition, tied to simulation."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("cvxpy")
+
+from etobs import SaveAt, simulate
+from etobs.design import certify, check_gain, estimate_output_rate, quadratic_iss_gains, slope_vertices
+from etobs.errors import InputError
+from etobs.estimation import min_inter_event_time
+from etobs.examples.robot_arm import L_PAPER, SECTOR, X0_PAPER, A, C, G, random_initial_states, robot_arm
+
+H = np.array([[0.0, 0.0, 1.0, 0.0]])
+VERTS = slope_vertices(G[:, None], H, [(-SECTOR, SECTOR)])
+GAIN = check_gain(A, C, L_PAPER, VERTS)
+ISS = quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=[0.1, 0.1])
+
+
+def test_gains_are_the_papers_formulas():
+    P, L = GAIN.P, GAIN.L
+    lmax = np.linalg.eigvalsh(P).max()
+    assert ISS.a == pytest.approx((1.0 - 0.1 - 0.2) / lmax, rel=1e-12)
+    assert ISS.k_v == pytest.approx(np.linalg.norm(P, 2) ** 2 / 0.1, rel=1e-12)
+    for i in range(2):
+        assert ISS.k[i] == pytest.approx(np.linalg.norm(P @ L[:, [i]], 2) ** 2 / 0.1, rel=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    x=st.lists(st.floats(-20, 20), min_size=4, max_size=4),
+    xi=st.lists(st.floats(-5, 5), min_size=4, max_size=4),
+    e=st.lists(st.floats(-3, 3), min_size=2, max_size=2),
+    v=st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+)
+def test_assumption_1_holds_with_these_gains(x, xi, e, v):
+    # eq. (12) for V = xi' P xi along the robot arm and observer (57) fed with ybar = y + e
+    x, xi, e, v = (np.array(a) for a in (x, xi, e, v))
+    xhat = x - xi
+    dxi = A @ xi + G * SECTOR * (np.sin(x[2]) - np.sin(xhat[2])) + v - L_PAPER @ (C @ xi + e)
+    V = xi @ GAIN.P @ xi
+    lhs = 2 * xi @ GAIN.P @ dxi
+    rhs = -ISS.a * V + ISS.k[0] * e[0] ** 2 + ISS.k[1] * e[1] ** 2 + ISS.k_v * (v @ v)
+    assert lhs <= rhs + 1e-9 * (1 + abs(rhs))
+
+
+def test_split_constants_are_checked():
+    with pytest.raises(InputError, match=r"lambda_min\(Q\) - c_v - sum\(c\) > 0; got 1 - 0.5 - 0.6 = -0.1"):
+        quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.5, c=[0.3, 0.3])
+    with pytest.raises(InputError, match=r"`c` must have one constant per node \(2\); got 1"):
+        quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=[0.1])
+    with pytest.raises(InputError, match=r"`c\[1\]` must be > 0; got 0"):
+        quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=[0.1, 0.0])
+    with pytest.raises(InputError, match=r"`nodes\[1\]` must list output indices in 0..1; got \[2\]"):
+        quadratic_iss_gains(GAIN, [[0], [2]], c_v=0.1, c=[0.1, 0.1])
+    bad = check_gain(A, C, np.zeros((4, 2)), VERTS)
+    with pytest.raises(InputError, match="`gain` does not pass its LMI re-check"):
+        quadratic_iss_gains(bad, [[0], [1]], c_v=0.1, c=[0.1, 0.1])
+
+
+def test_certificate_of_the_papers_parameters():
+    cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
+    assert cert.ok
+    # Theorem 1 by hand: d* = sigma/(1 - sigma c) = 1500, 4000; d = 2 d*;
+    # nu = sum (1 + d c) eps = 4*10 + 9*10 = 130; its infimum sum eps/(1 - sigma c) = 25 + 50
+    assert [nd.d_star for nd in cert.nodes] == pytest.approx([1500.0, 4000.0])
+    assert [nd.delta for nd in cert.nodes] == pytest.approx([3000 - 600 * 4, 8000 - 800 * 9])
+    assert cert.nu == pytest.approx(130.0) and cert.nu_inf == pytest.approx(75.0)
+    # Theorem 3: tau_i = gamma^{-1}(eps)/E = sqrt(10/5)/E_i
+    assert [nd.tau for nd in cert.nodes] == pytest.approx([math.sqrt(2) / 10, math.sqrt(2) / 20])
+    # Theorem 2: a_U = 0.9 min(a, 2 (1 - 0.6), 3 (1 - 0.8)); mu = (1 + max d_i c_i) sum eps / a_U
+    a_U = 0.9 * min(ISS.a, 0.8, 0.6)
+    d2 = [600 / (1 - 0.6 - a_U / 2), 800 / (1 - 0.8 - a_U / 3)]
+    assert cert.a_U == pytest.approx(a_U)
+    assert cert.mu == pytest.approx((1 + max(d * 0.001 for d in d2)) * 20 / a_U)
+    assert cert.scale == pytest.approx(min(5 / k for k in ISS.k))
+    text = cert.format()
+    assert "certificate: all conditions hold" in text and "nu = 130" in text
+    assert cert.to_dict()["ok"] is True
+
+
+def test_a_violated_condition_names_the_node():
+    cert = certify(robot_arm(sigma=(600.0, 1200.0)))
+    assert not cert.ok
+    (fail,) = cert.failures()
+    assert fail.node == 1 and fail.name == "sigma*c < 1 (Theorem 1)" and "1.2" in fail.detail
+    assert math.isnan(cert.nu)
+    noisy = certify(robot_arm(eps=(10.0, 1e-4)), noise=[0.0, 0.01])
+    assert [(c.node, c.name) for c in noisy.failures()] == [(1, "eps > gamma(2 m) (section 6.2)")]
+    fast = certify(robot_arm(), ISS, a_U=0.7)
+    assert [c.name for c in fast.failures()] == ["a_U <= a and a_i > a_U / (1 - sigma_i c_i) (Theorem 2)"]
+
+
+def test_certify_rejects_bad_input():
+    with pytest.raises(InputError, match=r"`d` must have one value per node \(2\); got 1"):
+        certify(robot_arm(), d=[1.0])
+    with pytest.raises(InputError, match=r"`E\[0\]` must be > 0; got -1"):
+        certify(robot_arm(), E=-1.0)
+    with pytest.raises(InputError, match="`problem` must be an EstimationProblem; got str"):
+        certify("robot arm")
+
+
+def test_observed_inter_event_times_are_never_below_tau():
+    # Theorem 3 on simulated runs, with E_i estimated on the same runs (plus 5 % for the
+    # grid); no measurement noise: the rule sees y itself
+    pb = robot_arm(noise=False)
+    x0 = np.vstack([X0_PAPER, random_initial_states(5, seed=3)])
+    E = 1.05 * estimate_output_rate(pb, x0, 10.0)
+    cert = certify(pb, E=list(E))
+    res = simulate(pb, x0, 10.0, save=SaveAt(steps=False))
+    mins = min_inter_event_time(res)
+    for i, nd in enumerate(cert.nodes):
+        assert np.nanmin(mins[:, i]) >= nd.tau > 0
+
+
+@settings(max_examples=6, deadline=None)
+@given(
+    sigma=st.floats(0.0, 900.0),
+    eps=st.floats(1.0, 50.0),
+    a=st.floats(0.5, 5.0),
+    b=st.floats(0.0, 1.0),
+    seed=st.integers(0, 1000),
+)
+def test_U_never_increases_at_jumps_and_obeys_the_flow_bound(sigma, eps, a, b, seed):
+    # Theorem 1 (ii)-(iii) along simulated arcs of the robot arm (paper's L, no v, m):
+    # U = lambda V + sum d_i eta_i with V' = lambda V the scaled ISS Lyapunov function
+    pb = robot_arm(sigma=sigma, eps=eps, a=a, b=b, noise=False, disturbance=False)
+    cert = certify(pb, ISS)
+    assert cert.ok
+    lam, d = cert.scale, np.array([nd.d for nd in cert.nodes])
+    res = simulate(pb, random_initial_states(1, seed=seed), 3.0, save=SaveAt(steps=True))
+    arc = res.arc(0)
+    xi = arc.x - arc.xhat
+    U = lam * np.einsum("ki,ij,kj->k", xi, GAIN.P, xi) + arc.eta @ d
+    jumps = np.flatnonzero(np.diff(arc.j) > 0)
+    assert np.all(U[jumps + 1] <= U[jumps] * (1 + 1e-12) + 1e-12)
+    # flow: dU/dt <= -a V' - sum delta_i alpha_i(eta_i) + nu (eq. (25), theta(|v|) = 0)
+    flows = np.flatnonzero(np.diff(arc.j) == 0)
+    k = flows[np.diff(arc.t)[flows] > 0]
+    dU = (U[k + 1] - U[k]) / (arc.t[k + 1] - arc.t[k])
+    mid = 0.5 * (U[k + 1] + U[k]) - 0.5 * (arc.eta[k + 1] + arc.eta[k]) @ d
+    eta_mid = 0.5 * (arc.eta[k + 1] + arc.eta[k])
+    delta = np.array([nd.delta for nd in cert.nodes])
+    bound = -ISS.a * mid - eta_mid @ (delta * np.array([a, a])) + cert.nu
+    # a secant slope against the bound at the midpoint: allow the O(h^2) gap of the secant
+    assert np.all(dU <= bound + 1e-3 * (1 + np.abs(bound)))
