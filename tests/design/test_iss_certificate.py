@@ -148,3 +148,47 @@ def test_U_never_increases_at_jumps_and_obeys_the_flow_bound(sigma, eps, a, b, s
     bound = -ISS.a * mid - eta_mid @ (delta * np.array([a, a])) + cert.nu
     # a secant slope against the bound at the midpoint: allow the O(h^2) gap of the secant
     assert np.all(dU <= bound + 1e-3 * (1 + np.abs(bound)))
+
+
+def _arm(proposal):
+    r = proposal.rules
+    return robot_arm(
+        sigma=[x.sigma for x in r],
+        c=[x.c for x in r],
+        b=[x.b for x in r],
+        a=[x.alpha.a for x in r],
+        ell=[x.gamma.ell for x in r],
+        eps=[x.eps for x in r],
+    )
+
+
+def test_proposed_rules_meet_the_requested_nu():
+    from etobs.design import propose_rules
+
+    prop = propose_rules(ISS, sigma=[600.0, 800.0], c=[0.001, 0.001], nu=50.0, a=[2.0, 3.0])
+    cert = certify(_arm(prop), ISS)
+    assert cert.ok and cert.nu == pytest.approx(50.0) and cert.scale == pytest.approx(1.0)
+
+
+def test_proposed_rules_meet_the_requested_rate_and_bound():
+    from etobs.design import propose_rules
+
+    a_U = 0.5 * ISS.a
+    prop = propose_rules(ISS, sigma=[600.0, 800.0], c=[0.001, 0.001], a_U=a_U, mu=2.0)
+    cert = certify(_arm(prop), ISS, a_U=a_U)
+    assert cert.ok and cert.a_U == pytest.approx(a_U) and cert.mu == pytest.approx(2.0)
+    # with a_i = 2 a_U / (1 - sigma_i c_i), item (iv)'s d_i is 2 d_i*
+    assert list(prop.d) == pytest.approx([2 * 600 / 0.4, 2 * 800 / 0.2])
+
+
+def test_propose_rules_rejects_impossible_requests():
+    from etobs.design import propose_rules
+
+    with pytest.raises(InputError, match="give either `nu` \\(Theorem 1\\) or both `a_U` and `mu`"):
+        propose_rules(ISS, sigma=[1.0, 1.0], c=[0.1, 0.1], a_U=0.1)
+    with pytest.raises(InputError, match=r"node 1: sigma\*c must be < 1 \(Theorem 1\); got 20\*0.1 = 2"):
+        propose_rules(ISS, sigma=[1.0, 20.0], c=[0.1, 0.1], nu=1.0)
+    with pytest.raises(InputError, match=r"node 0: a must be > a_U / \(1 - sigma\*c\)"):
+        propose_rules(ISS, sigma=[1.0, 1.0], c=[0.5, 0.5], a_U=0.1, mu=1.0, a=[0.1, 1.0])
+    with pytest.raises(InputError, match=r"`a_U` must be <= "):
+        propose_rules(ISS, sigma=[1.0, 1.0], c=[0.5, 0.5], a_U=10.0, mu=1.0)

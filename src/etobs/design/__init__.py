@@ -1,6 +1,6 @@
 """Observer design and the paper's guarantees: LMI gains, ISS gains, certificates."""
 
-from etobs.design.certificate import Certificate, Condition, NodeNumbers, certify
+from etobs.design.certificate import Certificate, Condition, NodeNumbers, RuleProposal, certify, propose_rules
 from etobs.design.iss import QuadraticISS, even_split, quadratic_iss_gains
 from etobs.design.lmi import ObserverGain, check_gain, observer_gain, slope_vertices
 from etobs.design.rates import estimate_output_rate
@@ -11,11 +11,13 @@ __all__ = [
     "NodeNumbers",
     "ObserverGain",
     "QuadraticISS",
+    "RuleProposal",
     "certify",
     "check_gain",
     "estimate_output_rate",
     "even_split",
     "observer_gain",
+    "propose_rules",
     "quadratic_iss_gains",
     "slope_vertices",
 ]
