@@ -1,6 +1,8 @@
 """Model objects: plant, observer, nodes, triggering rules, class-K functions, signals."""
 
 from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
+from etobs.model.high_gain import high_gain_gain, high_gain_observer
+from etobs.model.kalman import ekf_initial_state, extended_kalman_filter
 from etobs.model.node import Node
 from etobs.model.observer import JitObserver, Observer, luenberger
 from etobs.model.plant import JitPlant, Plant
@@ -27,5 +29,9 @@ __all__ = [
     "StaticRule",
     "TriggerRule",
     "Zero",
+    "ekf_initial_state",
+    "extended_kalman_filter",
+    "high_gain_gain",
+    "high_gain_observer",
     "luenberger",
 ]
