@@ -192,3 +192,21 @@ def test_propose_rules_rejects_impossible_requests():
         propose_rules(ISS, sigma=[1.0, 1.0], c=[0.5, 0.5], a_U=0.1, mu=1.0, a=[0.1, 1.0])
     with pytest.raises(InputError, match=r"`a_U` must be <= "):
         propose_rules(ISS, sigma=[1.0, 1.0], c=[0.5, 0.5], a_U=10.0, mu=1.0)
+
+
+@settings(max_examples=10, deadline=None)
+@given(eps=st.floats(1e-4, 1e-1), sigma=st.floats(0.0, 5.0), x0=st.floats(0.5, 5.0))
+def test_transmissions_stop_when_the_output_stays_in_a_small_ball(eps, sigma, x0):
+    # Lemma 2: once |y(t) - y*| < gamma^{-1}(eps)/2 for all later t, at most one more
+    # transmission (the one that resets e) happens. Plant x' = -x, y = x -> y* = 0.
+    from etobs import DynamicRule, EstimationProblem, Linear, Node, Plant, Quadratic, luenberger
+
+    plant = Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x, n_x=1, n_y=1)
+    obs = luenberger(lambda t, x, u: -x, [[1.0]])
+    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=sigma, c=0.1, eps=eps)
+    pb = EstimationProblem(plant=plant, observer=obs, nodes=(Node(outputs=(0,), rule=rule),))
+    res = simulate(pb, [x0], 20.0, save=SaveAt(steps=False))
+    T = np.log(x0 / (0.5 * np.sqrt(eps)))  # |y(t)| = x0 e^{-t} < sqrt(eps)/2 for t > T
+    late = res.transmission_times(0, 0)
+    assert np.sum(late > T) <= 1
+    assert late.size >= 1  # it did transmit before
