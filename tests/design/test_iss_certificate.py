@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 pytest.importorskip("cvxpy")
@@ -100,6 +100,8 @@ def test_certify_rejects_bad_input():
         certify(robot_arm(), d=[1.0])
     with pytest.raises(InputError, match=r"`E\[0\]` must be > 0; got -1"):
         certify(robot_arm(), E=-1.0)
+    with pytest.raises(InputError, match=r"`noise` must have one bound per node \(2\); got 1"):
+        certify(robot_arm(), noise=[0.1])
     with pytest.raises(InputError, match="`problem` must be an EstimationProblem; got str"):
         certify("robot arm")
 
@@ -126,28 +128,58 @@ def test_observed_inter_event_times_are_never_below_tau():
     seed=st.integers(0, 1000),
 )
 def test_U_never_increases_at_jumps_and_obeys_the_flow_bound(sigma, eps, a, b, seed):
-    # Theorem 1 (ii)-(iii) along simulated arcs of the robot arm (paper's L, no v, m):
-    # U = lambda V + sum d_i eta_i with V' = lambda V the scaled ISS Lyapunov function
+    # Theorem 1 (ii)-(iii) along simulated arcs of the robot arm (paper's L, no v, m)
     pb = robot_arm(sigma=sigma, eps=eps, a=a, b=b, noise=False, disturbance=False)
     cert = certify(pb, ISS)
     assert cert.ok
+    _check_U(pb, cert, GAIN.P, ISS.a, random_initial_states(1, seed=seed), 3.0)
+
+
+def _check_U(pb, cert, P, rate, x0, t_end):
+    """U = lambda V + sum d_i eta_i (V' = lambda V the scaled ISS Lyapunov function) along arcs."""
     lam, d = cert.scale, np.array([nd.d for nd in cert.nodes])
-    res = simulate(pb, random_initial_states(1, seed=seed), 3.0, save=SaveAt(steps=True))
-    arc = res.arc(0)
-    xi = arc.x - arc.xhat
-    U = lam * np.einsum("ki,ij,kj->k", xi, GAIN.P, xi) + arc.eta @ d
-    jumps = np.flatnonzero(np.diff(arc.j) > 0)
-    assert np.all(U[jumps + 1] <= U[jumps] * (1 + 1e-12) + 1e-12)
-    # flow: dU/dt <= -a V' - sum delta_i alpha_i(eta_i) + nu (eq. (25), theta(|v|) = 0)
-    flows = np.flatnonzero(np.diff(arc.j) == 0)
-    k = flows[np.diff(arc.t)[flows] > 0]
-    dU = (U[k + 1] - U[k]) / (arc.t[k + 1] - arc.t[k])
-    mid = 0.5 * (U[k + 1] + U[k]) - 0.5 * (arc.eta[k + 1] + arc.eta[k]) @ d
-    eta_mid = 0.5 * (arc.eta[k + 1] + arc.eta[k])
-    delta = np.array([nd.delta for nd in cert.nodes])
-    bound = -ISS.a * mid - eta_mid @ (delta * np.array([a, a])) + cert.nu
-    # a secant slope against the bound at the midpoint: allow the O(h^2) gap of the secant
-    assert np.all(dU <= bound + 1e-3 * (1 + np.abs(bound)))
+    res = simulate(pb, x0, t_end, save=SaveAt(steps=True))
+    assert res.ok
+    for run in range(res.n_runs):
+        arc = res.arc(run)
+        xi = arc.x - arc.xhat
+        U = lam * np.einsum("ki,ij,kj->k", xi, P, xi) + arc.eta @ d
+        jumps = np.flatnonzero(np.diff(arc.j) > 0)
+        assert np.all(U[jumps + 1] <= U[jumps] * (1 + 1e-12) + 1e-12)  # Theorem 1 (iii)
+        # Theorem 1 (ii), theta(|v|) = 0: dU/dt <= -a V' - sum delta_i alpha_i(eta_i) + nu
+        flows = np.flatnonzero(np.diff(arc.j) == 0)
+        k = flows[np.diff(arc.t)[flows] > 0]
+        dU = (U[k + 1] - U[k]) / (arc.t[k + 1] - arc.t[k])
+        eta_mid = 0.5 * (arc.eta[k + 1] + arc.eta[k])
+        V_mid = 0.5 * (U[k + 1] + U[k]) - eta_mid @ d
+        alpha_eta = np.stack([nd.rule.alpha(eta_mid[:, i]) for i, nd in enumerate(pb.nodes)], axis=1)
+        bound = -rate * V_mid - alpha_eta @ np.array([nd.delta for nd in cert.nodes]) + cert.nu
+        # a secant slope against the bound at the midpoint: allow the O(h^2) gap of the secant
+        assert np.all(dU <= bound + 1e-3 * (1 + np.abs(bound)))
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10_000), sigma=st.floats(0.0, 5.0), nu=st.floats(0.01, 1.0))
+def test_U_on_random_linear_plants_with_designed_gains_and_proposed_rules(seed, sigma, nu):
+    # random observable 2-state plant, two nodes (y_1 = x_1, y_2 = x_2), L from the LMIs,
+    # ISS gains from P, rules from propose_rules(nu): the certificate holds and U behaves
+    from etobs import EstimationProblem, Node, Plant, luenberger
+    from etobs.design import observer_gain, propose_rules
+
+    rng = np.random.default_rng(seed)
+    A_ = rng.normal(size=(2, 2))
+    assume(np.all(np.abs(np.linalg.eigvals(A_)) < 3))  # keep the horizon's growth moderate
+    g = observer_gain(A_, np.eye(2), objective="max_decay", max_gain=20.0)
+    iss = quadratic_iss_gains(g, [[0], [1]], c_v=0.1, c=[0.2, 0.2])
+    prop = propose_rules(iss, sigma=[sigma, sigma], c=[0.1, 0.1], nu=nu, a=[1.0, 1.0])
+    plant = Plant(f_p=lambda t, x, u, v: x @ A_.T, h=lambda x: x, n_x=2, n_y=2)
+    obs = luenberger(lambda t, x, u: x @ A_.T, g.L)
+    nodes = tuple(Node(outputs=(i,), rule=r) for i, r in enumerate(prop.rules))
+    pb = EstimationProblem(plant=plant, observer=obs, nodes=nodes)
+    cert = certify(pb, iss)
+    assert cert.ok and cert.nu == pytest.approx(nu) and cert.scale == pytest.approx(1.0)
+    x0 = rng.uniform(-3, 3, size=(2, 2))
+    _check_U(pb, cert, g.P, iss.a, x0, 2.0)
 
 
 def _arm(proposal):

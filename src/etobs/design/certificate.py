@@ -196,6 +196,8 @@ def certify(
         if len(Es) != N:
             raise InputError(f"`E` must be one bound or one per node ({N}); got {len(Es)}")
     v.real("disturbance", disturbance, lower=0.0)
+    if noise is not None and len(noise) != N:
+        raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
     conds: list[Condition] = []
     nodes = []
     nu = nu_inf = 0.0
@@ -225,8 +227,6 @@ def certify(
                     i,
                 )
             )
-    if noise is not None and len(noise) != N:
-        raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
     out = Certificate(conditions=tuple(conds), nodes=tuple(nodes), nu=nu, nu_inf=nu_inf)
     if iss is None:
         return out
