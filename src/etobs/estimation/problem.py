@@ -9,6 +9,7 @@ exact at every instant and ``ybar`` is constant along flows (eq. (4)), so the pa
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,7 +20,7 @@ from etobs.hybrid.system import HybridSystem
 from etobs.model.node import Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
-from etobs.model.signals import Signal, as_signal
+from etobs.model.signals import Signal, Sinusoid, as_signal
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,7 @@ class EstimationProblem:
         object.__setattr__(self, "m", as_signal("m", self.m, p.n_y))
         object.__setattr__(self, "layout", _layout(p, self.observer, nodes))
         _check_shapes(self)
+        _check_noise(self)
 
     @property
     def n_nodes(self) -> int:
@@ -206,3 +208,28 @@ def _check_shapes(pb: EstimationProblem) -> None:
     y = check("h", p.h(x), (b, p.n_y), f"({b}, n_y={p.n_y})")
     xhat = check("psi", pb.psi(z), (b, p.n_x), f"({b}, n_x={p.n_x})")
     check("f_o", o.f_o(t, z, u, y, p.h(xhat)), (b, o.n_z), f"({b}, n_z={o.n_z})")
+
+
+def _check_noise(pb: EstimationProblem) -> None:
+    """Warn when a node's ``eps_i <= gamma_i(2 m_i)`` (section 6.2) for sinusoidal noise.
+
+    The rule sees ``e~_i = e_i + m_i(t_k) - m_i(t)``; a sinusoid's offset cancels there,
+    so ``m_i`` is the norm of the node's amplitudes. Without the condition the noise
+    alone can trigger transmissions, and the minimum inter-event time is lost.
+    """
+    if not isinstance(pb.m, Sinusoid):
+        return
+    for i, nd in enumerate(pb.nodes):
+        gamma, eps = getattr(nd.rule, "gamma", None), getattr(nd.rule, "eps", None)
+        if gamma is None or eps is None:
+            continue
+        bound = float(np.linalg.norm(pb.m.amplitude[list(nd.outputs)]))
+        g2m = float(np.asarray(gamma(np.array([2.0 * bound])))[0])
+        if bound > 0 and eps <= g2m:
+            warnings.warn(
+                f"node {i} ({nd.name!r}): eps = {eps:g} <= gamma(2 m) = {g2m:.6g} with noise bound "
+                f"m = {bound:g}: section 6.2's condition fails, so noise alone can trigger transmissions; "
+                "raise eps",
+                RuntimeWarning,
+                stacklevel=3,
+            )

@@ -1,12 +1,13 @@
 """Model objects: plant, observer, nodes, triggering rules, class-K functions, signals."""
 
 from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
+from etobs.model.generalized import GeneralizedRule
 from etobs.model.high_gain import high_gain_gain, high_gain_observer
 from etobs.model.kalman import ekf_initial_state, extended_kalman_filter
 from etobs.model.node import Node
 from etobs.model.observer import JitObserver, Observer, luenberger
 from etobs.model.plant import JitPlant, Plant
-from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule, TriggerRule
+from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule, TriggerRule, send_on_delta
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
 __all__ = [
@@ -14,6 +15,7 @@ __all__ = [
     "Custom",
     "DynamicRule",
     "FunctionSignal",
+    "GeneralizedRule",
     "JitObserver",
     "JitPlant",
     "KFunction",
@@ -34,4 +36,5 @@ __all__ = [
     "high_gain_gain",
     "high_gain_observer",
     "luenberger",
+    "send_on_delta",
 ]

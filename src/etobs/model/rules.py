@@ -162,6 +162,18 @@ class StaticRule(TriggerRule):
         return s
 
 
+def send_on_delta(delta: float) -> StaticRule:
+    """Send-on-delta: transmit when ``|e| = |ybar - ytilde| >= delta``.
+
+    It is the static rule with ``gamma(s) = s`` and ``eps = delta``.
+
+    >>> send_on_delta(0.1).trigger(np.zeros(1), np.array([[0.25]]), np.empty((1, 0))).round(12).tolist()
+    [0.15]
+
+    """
+    return StaticRule(gamma=Linear(1.0), eps=v.real("delta", delta, lower=0.0, lower_open=True))
+
+
 @dataclass(frozen=True)
 class PeriodicRule(TriggerRule):
     """Time-triggered baseline: transmit at ``first, first + period, first + 2*period, ...``.

@@ -1,0 +1,108 @@
+"""The generalized dynamic rule of section 6.1 (eq. (44)--(45)).
+
+``eta' = -alpha_check(eta) + gamma_check(|e|)`` along flows, ``eta+ = b eta`` at the
+node's transmission, and transmission when::
+
+    gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps     (45)
+
+where ``d'`` (the paper's fraktur d) is non-decreasing, continuous, and zero only at
+zero, ``d(s) = int_0^s d'``, and ``sigma`` is in ``(0, 1)``. The Lyapunov function is
+then ``U = V + sum_i d_i(eta_i)`` (section 6.1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.model.functions import KFunction, Linear, as_kfunction
+from etobs.model.rules import TriggerRule, _norm
+
+
+@dataclass(frozen=True)
+class GeneralizedRule(TriggerRule):
+    """Section 6.1's rule: any ``alpha_check``, ``gamma_check`` and weight ``d'``.
+
+    Parameters
+    ----------
+    gamma : KFunction
+        ``gamma_i`` of Assumption 1.
+    gamma_check, alpha_check : KFunction
+        The filter ``eta' = -alpha_check(eta) + gamma_check(|e|)`` (eq. (44));
+        ``alpha_check`` defaults to ``Linear(1.0)``.
+    d_prime : KFunction or float
+        The weight ``d'(eta)``: a KFunction or a positive constant.
+    sigma : float
+        In ``(0, 1)``.
+    eps : float
+        ``> 0``.
+    b : float
+        ``eta+ = b eta`` at the node's transmission, in ``[0, 1]``.
+    eta0 : float
+        ``eta(0) >= 0``.
+
+    Examples
+    --------
+    With ``d' = d`` constant, ``gamma_check = c gamma`` and ``alpha_check = alpha``,
+    (45) reads ``(1 + d c) gamma(|e|) >= sigma d alpha(eta) + eps``:
+
+    >>> import numpy as np
+    >>> from etobs.model import Linear, Quadratic
+    >>> r = GeneralizedRule(gamma=Quadratic(1.0), alpha_check=Linear(2.0), gamma_check=Quadratic(0.5),
+    ...                     d_prime=4.0, sigma=0.5, eps=1.0)
+    >>> float(r.trigger(np.zeros(1), np.array([[1.0]]), np.array([[1.0]]))[0])  # 1 + 4*0.5 - 0.5*4*2 - 1
+    -2.0
+
+    """
+
+    gamma: KFunction
+    gamma_check: KFunction
+    alpha_check: KFunction = field(default_factory=lambda: Linear(1.0))
+    d_prime: KFunction | float = 1.0
+    sigma: float = 0.5
+    eps: float = 1.0
+    b: float = 1.0
+    eta0: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
+        object.__setattr__(self, "alpha_check", as_kfunction("alpha_check", self.alpha_check))
+        object.__setattr__(self, "gamma_check", as_kfunction("gamma_check", self.gamma_check))
+        if isinstance(self.d_prime, int | float) and not isinstance(self.d_prime, bool):
+            object.__setattr__(self, "d_prime", v.real("d_prime", self.d_prime, lower=0.0, lower_open=True))
+        else:
+            object.__setattr__(self, "d_prime", as_kfunction("d_prime", self.d_prime))
+        object.__setattr__(
+            self, "sigma", v.real("sigma", self.sigma, lower=0.0, upper=1.0, lower_open=True, upper_open=True)
+        )
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
+        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
+
+    @property
+    def n_state(self) -> int:
+        return 1
+
+    def initial_state(self) -> np.ndarray:
+        return np.array([self.eta0])
+
+    def weight(self, eta: np.ndarray) -> np.ndarray:
+        """``d'(eta)``."""
+        if isinstance(self.d_prime, float):
+            return np.full_like(eta, self.d_prime)
+        return self.d_prime(eta)
+
+    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (44): eta' = -alpha_check(eta) + gamma_check(|e|)
+        return (-self.alpha_check(s[:, 0]) + self.gamma_check(_norm(e)))[:, None]
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
+        eta, r = s[:, 0], _norm(e)
+        w = self.weight(eta)
+        return self.gamma(r) + w * self.gamma_check(r) - self.sigma * w * self.alpha_check(eta) - self.eps
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return self.b * s
