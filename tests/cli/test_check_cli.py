@@ -66,3 +66,12 @@ def test_packaged_robot_arm_check_estimates_E_and_passes(capsys):
     assert main(["check", "robot_arm"]) == 0
     out = capsys.readouterr().out
     assert "certificate: all conditions hold" in out and "ultimate bound on |x - xhat|" in out
+
+
+def test_check_with_a_designed_gain(tmp_path, capsys):
+    path = write(tmp_path).replace("check.toml", "check.toml")
+    text = (tmp_path / "check.toml").read_text().replace('L = "paper"', 'L = "design"')
+    (tmp_path / "check.toml").write_text(text)
+    assert main(["check", path]) == 0
+    out = capsys.readouterr().out
+    assert "certificate: all conditions hold" in out and "ultimate bound on |x - xhat|" in out

@@ -30,6 +30,7 @@ bad input.
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 import tomllib
 from importlib import resources
@@ -62,8 +63,14 @@ def run(args: argparse.Namespace) -> int:
     params = system.get("params", {})
     if not isinstance(params, dict):
         raise SpecError(f"`system.params` must be a table; got {type(params).__name__}")
-    problem = resolve_factory(system["factory"])(**params)
-    iss = _iss(top.get("observer"), problem) if "observer" in top else None
+    factory = resolve_factory(system["factory"])
+    problem = factory(**params)
+    iss = None
+    if "observer" in top:
+        iss, L = _iss(top["observer"], problem)
+        # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
+        if "L" not in params and "L" in inspect.signature(factory).parameters:
+            problem = factory(**params, L=L)
     g = _keys(
         "guarantees",
         top.get("guarantees", {}),
@@ -102,7 +109,8 @@ def _load(name: str) -> dict[str, Any]:
         raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
 
 
-def _iss(table: Any, problem: Any) -> Any:
+def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
+    """The ISS gains of the spec's observer, and its gain ``L``."""
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
 
     keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q"}
@@ -131,7 +139,7 @@ def _iss(table: Any, problem: Any) -> Any:
     else:
         gain = check_gain(A, C, obs["L"], verts, Q=Q)
     nodes = [list(nd.outputs) for nd in problem.nodes]
-    return quadratic_iss_gains(gain, nodes, c_v=obs["c_v"], c=obs["c"])
+    return quadratic_iss_gains(gain, nodes, c_v=obs["c_v"], c=obs["c"]), gain.L
 
 
 def _robot_arm_structure() -> tuple[Any, ...]:
