@@ -56,9 +56,23 @@ def test_check_rejects_bad_specs(tmp_path, capsys):
         main(["check", bad])
     assert exc.value.code == 2
     assert "unknown key `observer.foo`" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit) as exc:
         main(["check", str(tmp_path / "missing.toml")])
+    assert exc.value.code == 2
     assert "SPEC must be a TOML file or one of robot_arm; got" in capsys.readouterr().err
+
+
+def test_an_unsolvable_design_is_bad_input_not_a_failed_condition(tmp_path, capsys):
+    # x_1 unstable and unseen by y = x_2: the LMIs have no solution -> exit 2, one line
+    spec = tmp_path / "lin.toml"
+    spec.write_text(
+        '[system]\nfactory = "robot_arm"\n[observer]\nA = [[1.0, 0.0], [0.0, -1.0]]\nC = [[0.0, 1.0]]\n'
+        'L = "design"\nc_v = 0.1\nc = [0.1, 0.1]\n'
+    )
+    with pytest.raises(SystemExit) as exc:
+        main(["check", str(spec)])
+    assert exc.value.code == 2
+    assert "etobs: error: the observer LMIs have no solution" in capsys.readouterr().err
 
 
 @pytest.mark.slow

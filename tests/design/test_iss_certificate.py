@@ -70,14 +70,14 @@ def test_certificate_of_the_papers_parameters():
     assert [nd.d_star for nd in cert.nodes] == pytest.approx([1500.0, 4000.0])
     assert [nd.delta for nd in cert.nodes] == pytest.approx([3000 - 600 * 4, 8000 - 800 * 9])
     assert cert.nu == pytest.approx(130.0) and cert.nu_inf == pytest.approx(75.0)
-    # Theorem 3: tau_i = gamma^{-1}(eps)/E = sqrt(10/5)/E_i
-    assert [nd.tau for nd in cert.nodes] == pytest.approx([math.sqrt(2) / 10, math.sqrt(2) / 20])
+    # Theorem 3 with section 6.2's noise: tau_i = (gamma^{-1}(eps) - 2 m_i)/E_i, gamma^{-1}(10) = sqrt(2)
+    assert [nd.tau for nd in cert.nodes] == pytest.approx([math.sqrt(2) / 10, (math.sqrt(2) - 0.02) / 20])
     # Theorem 2: a_U = 0.9 min(a, 2 (1 - 0.6), 3 (1 - 0.8)); mu = (1 + max d_i c_i) sum eps / a_U
     a_U = 0.9 * min(ISS.a, 0.8, 0.6)
     d2 = [600 / (1 - 0.6 - a_U / 2), 800 / (1 - 0.8 - a_U / 3)]
     assert cert.a_U == pytest.approx(a_U)
     assert cert.mu == pytest.approx((1 + max(d * 0.001 for d in d2)) * 20 / a_U)
-    assert cert.scale == pytest.approx(min(5 / k for k in ISS.k))
+    assert cert.scale == pytest.approx(min(5 / (2 * k) for k in ISS.k))  # with noise: 2 k_i
     text = cert.format()
     assert "certificate: all conditions hold" in text and "nu = 130" in text
     assert cert.to_dict()["ok"] is True
@@ -89,7 +89,9 @@ def test_a_violated_condition_names_the_node():
     (fail,) = cert.failures()
     assert fail.node == 1 and fail.name == "sigma*c < 1 (Theorem 1)" and "1.2" in fail.detail
     assert math.isnan(cert.nu)
-    noisy = certify(robot_arm(eps=(10.0, 1e-4)), noise=[0.0, 0.01])
+    with pytest.warns(RuntimeWarning, match="section 6.2's condition fails"):
+        problem = robot_arm(eps=(10.0, 1e-4))
+    noisy = certify(problem, noise=[0.0, 0.01])
     assert [(c.node, c.name) for c in noisy.failures()] == [(1, "eps > gamma(2 m) (section 6.2)")]
     fast = certify(robot_arm(), ISS, a_U=0.7)
     assert [c.name for c in fast.failures()] == ["a_U <= a and a_i > a_U / (1 - sigma_i c_i) (Theorem 2)"]
@@ -191,6 +193,7 @@ def _arm(proposal):
         a=[x.alpha.a for x in r],
         ell=[x.gamma.ell for x in r],
         eps=[x.eps for x in r],
+        noise=False,  # the proposals certify the noise-free case
     )
 
 
@@ -242,3 +245,30 @@ def test_transmissions_stop_when_the_output_stays_in_a_small_ball(eps, sigma, x0
     late = res.transmission_times(0, 0)
     assert np.sum(late > T) <= 1
     assert late.size >= 1  # it did transmit before
+
+
+def test_noise_shortens_tau_and_enters_the_error_bound():
+    # section 6.2: |e~| <= E s + 2 m after a transmission, so tau = (gamma^{-1}(eps) - 2 m) / E;
+    # the observer's error is e~ + m: lambda = min ell / (2 k), plus sum 2 lambda k m^2 / a_U
+    quiet = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.0])
+    noisy = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
+    assert noisy.nodes[1].tau == pytest.approx((math.sqrt(2) - 0.02) / 20)
+    assert noisy.nodes[0].tau == pytest.approx(quiet.nodes[0].tau)
+    assert noisy.scale == pytest.approx(quiet.scale / 2)
+    lam = noisy.scale
+    expected = math.sqrt((noisy.mu + 2 * lam * ISS.k[1] * 0.01**2 / noisy.a_U) / (lam * ISS.lambda_min_P))
+    assert noisy.error_bound == pytest.approx(expected)
+    assert quiet.error_bound == pytest.approx(math.sqrt(quiet.mu / (quiet.scale * ISS.lambda_min_P)))
+    assert len(noisy.d_U) == 2 and "with d_i = (" in noisy.format()
+
+
+def test_more_input_checks():
+    from etobs.design import even_split, propose_rules
+
+    assert certify(robot_arm(), E=np.float32(3.0)).nodes[0].tau == pytest.approx(math.sqrt(2) / 3, rel=1e-6)
+    with pytest.raises(InputError, match=r"`nodes` must share out the outputs 0..1 of L, each exactly once"):
+        quadratic_iss_gains(GAIN, [[0]], c_v=0.1, c=[0.1])
+    with pytest.raises(InputError, match=r"`a` must have one value per node \(2\); got 1"):
+        propose_rules(ISS, sigma=[1.0, 1.0], c=[0.1, 0.1], nu=1.0, a=[1.0])
+    with pytest.raises(InputError, match="`n_nodes` must be an integer >= 1; got 0"):
+        even_split(GAIN, 0)

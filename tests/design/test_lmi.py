@@ -124,3 +124,10 @@ def test_designed_gain_runs_like_the_papers():
     late = max_estimation_error(res["ours"], (20.0, 30.0))[0]
     paper_late = max_estimation_error(res["paper"], (20.0, 30.0))[0]
     assert late < early and late < paper_late
+
+
+def test_margins_are_validated():
+    with pytest.raises(InputError, match=r"`margin` must be <= 1 % of lambda_min\(Q\) = 0.01; got 0.1"):
+        observer_gain(A, C, VERTS, margin=0.1)
+    with pytest.raises(InputError, match="`margin` must be > 0; got -1"):
+        check_gain(A, C, L_PAPER, VERTS, margin=-1.0)

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from etobs.experiments.spec import SpecError, _keys
+from etobs.experiments.spec import SpecError, _keys, _number
 from etobs.experiments.systems import resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         a_U=g.get("a_U"),
         E=E,
         noise=g.get("noise"),
-        disturbance=float(g.get("disturbance", 0.0)),
+        disturbance=g.get("disturbance", 0.0),
     )
     print(cert.to_json() if args.json else cert.format())
     if not cert.ok and not args.json:
@@ -164,10 +164,10 @@ def _estimate(problem: Any, table: Any) -> list[float]:
             f"`guarantees.E_estimate.low/high` must be {problem.plant.n_x} numbers each with low <= high; "
             f"got {t['low']!r} and {t['high']!r}"
         )
-    runs, t_end = int(t.get("runs", 20)), float(t.get("t_end", 30.0))
-    margin = float(t.get("margin", 1.2))
-    if runs < 1 or t_end <= 0 or margin < 1:
-        raise SpecError("`guarantees.E_estimate` needs runs >= 1, t_end > 0 and margin >= 1")
-    rng = np.random.default_rng(int(t.get("seed", 0)))
+    where = "guarantees.E_estimate"
+    runs = int(_number(f"{where}.runs", t.get("runs", 20), lower=1, integer=True))
+    t_end = _number(f"{where}.t_end", t.get("t_end", 30.0), lower=0.0, strict=True)
+    margin = _number(f"{where}.margin", t.get("margin", 1.2), lower=1.0)
+    rng = np.random.default_rng(int(_number(f"{where}.seed", t.get("seed", 0), lower=0, integer=True)))
     x0 = low + rng.uniform(size=(runs, low.size)) * (high - low)
     return [margin * float(e) for e in estimate_output_rate(problem, x0, t_end, grid_step=1e-2)]

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 from etobs import __version__
 from etobs.cli import check, demo, sweep
-from etobs.errors import InputError
+from etobs.errors import EtobsError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +30,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except InputError as exc:  # bad input: one clear line, no traceback
+    except EtobsError as exc:  # bad input or an unsolvable design: one clear line, no traceback
         parser.exit(2, f"etobs: error: {exc}\n")
 
 

@@ -25,6 +25,8 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+import numpy as np
+
 from etobs import _validate as v
 from etobs.design.iss import QuadraticISS
 from etobs.errors import InputError
@@ -78,6 +80,8 @@ class Certificate:
         ``lambda`` of the module docstring (``nan`` without ISS gains).
     a_U, mu : float
         Theorem 2's rate and bound (``nan`` when it does not apply).
+    d_U : tuple of float
+        Theorem 2's ``d_i`` (item (iv)): ``mu`` bounds ``U = V' + sum d_U[i] eta_i``.
     error_bound : float
         Ultimate bound on ``|x - xhat|`` from Theorem 2 and the ISS gains, for the
         disturbance bound given (``nan`` when not available).
@@ -92,6 +96,7 @@ class Certificate:
     a_U: float = math.nan
     mu: float = math.nan
     error_bound: float = math.nan
+    d_U: tuple[float, ...] = ()
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -138,7 +143,8 @@ class Certificate:
             )
         lines.append(f"nu = {self.nu:.6g} (infimum over d: {self.nu_inf:.6g})")
         if math.isfinite(self.a_U):
-            lines.append(f"Theorem 2: a_U = {self.a_U:.6g}, mu = {self.mu:.6g}")
+            d_U = ", ".join(f"{x:.6g}" for x in self.d_U)
+            lines.append(f"Theorem 2: a_U = {self.a_U:.6g}, mu = {self.mu:.6g}, with d_i = ({d_U})")
         if math.isfinite(self.scale):
             lines.append(f"V' = lambda V with lambda = {self.scale:.6g}")
         if math.isfinite(self.error_bound):
@@ -198,6 +204,7 @@ def certify(
     v.real("disturbance", disturbance, lower=0.0)
     if noise is not None and len(noise) != N:
         raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
+    ms = [0.0] * N if noise is None else [v.real(f"noise[{i}]", x, lower=0.0) for i, x in enumerate(noise)]
     conds: list[Condition] = []
     nodes = []
     nu = nu_inf = 0.0
@@ -214,11 +221,13 @@ def certify(
             nu_inf += r.eps / (1 - sc)
         else:  # no d_i can satisfy Theorem 1
             d_star = di = delta = nu = nu_inf = math.nan
-        tau = float(r.gamma.inverse(r.eps)) / Es[i] if Es is not None else math.nan
+        # Theorem 3; with noise the gap the rule sees restarts at 0 but |e~| <= E s + 2 m,
+        # so it needs (gamma^{-1}(eps) - 2 m) / E (section 6.2's semi-global version)
+        reach = float(r.gamma.inverse(r.eps)) - 2 * ms[i]
+        tau = reach / Es[i] if Es is not None and reach > 0 else math.nan
         nodes.append(NodeNumbers(i, sigma, c, r.eps, sc, d_star, di, delta, tau))
         if noise is not None:
-            mi = v.real(f"noise[{i}]", noise[i], lower=0.0)
-            g2m = float(r.gamma(2 * mi))
+            g2m = float(r.gamma(2 * ms[i]))
             conds.append(
                 Condition(
                     "eps > gamma(2 m) (section 6.2)",
@@ -230,11 +239,11 @@ def certify(
     out = Certificate(conditions=tuple(conds), nodes=tuple(nodes), nu=nu, nu_inf=nu_inf)
     if iss is None:
         return out
-    return _with_iss(out, rules, iss, a_U, disturbance)
+    return _with_iss(out, rules, iss, a_U, disturbance, ms)
 
 
 def _per_node(value: Any, n: int) -> list[Any]:
-    if isinstance(value, int | float) and not isinstance(value, bool):
+    if np.ndim(value) == 0:
         return [value] * n
     return list(value)
 
@@ -252,7 +261,12 @@ def _rules(problem: EstimationProblem) -> list[Any]:
 
 
 def _with_iss(
-    cert: Certificate, rules: list[Any], iss: QuadraticISS, a_U: float | None, disturbance: float
+    cert: Certificate,
+    rules: list[Any],
+    iss: QuadraticISS,
+    a_U: float | None,
+    disturbance: float,
+    ms: list[float],
 ) -> Certificate:
     from dataclasses import replace
 
@@ -262,12 +276,15 @@ def _with_iss(
     conds = list(cert.conditions)
     notes = list(cert.notes)
     quad = all(isinstance(r.gamma, Quadratic) for r in rules)
-    scale = min(r.gamma.ell / k for r, k in zip(rules, iss.k, strict=True)) if quad else math.nan
+    # With noise the observer's error is e~ + m, and k |e~ + m|^2 <= 2 k |e~|^2 + 2 k m^2:
+    # the rule's gain must then dominate 2 lambda k_i, and 2 lambda k_i m_i^2 is added.
+    two = 2.0 if any(m > 0 for m in ms) else 1.0
+    scale = min(r.gamma.ell / (two * k) for r, k in zip(rules, iss.k, strict=True)) if quad else math.nan
     conds.append(
         Condition(
             "rule gamma_i = ell_i s^2 with quadratic ISS gains (Remark 1)",
             quad,
-            f"V' = lambda V, lambda = min_i ell_i / k_i = {scale:.6g}"
+            f"V' = lambda V, lambda = min_i ell_i / ({two:g} k_i) = {scale:.6g}"
             if quad
             else "a rule gamma is not quadratic",
         )
@@ -303,10 +320,21 @@ def _with_iss(
     varsigma = max(di * (r.c if isinstance(r, DynamicRule) else 0.0) for di, r in zip(d2, rules, strict=True))
     mu = (1 + varsigma) * sum(r.eps for r in rules) / rate
     # in units of V' = scale V: theta' = scale k_v; |xi|^2 <= V / lambda_min(P) = V' / (scale lambda_min(P))
-    bound = math.sqrt((mu + scale * iss.k_v * disturbance**2 / rate) / (scale * iss.lambda_min_P))
-    notes.append("the error bound assumes no measurement noise (m = 0)")
+    extra = scale * iss.k_v * disturbance**2 + sum(
+        2 * scale * k * m**2 for k, m in zip(iss.k, ms, strict=True)
+    )
+    bound = math.sqrt((mu + extra / rate) / (scale * iss.lambda_min_P))
+    if two > 1:
+        notes.append("with noise: lambda uses 2 k_i, and sum 2 lambda k_i m_i^2 / a_U enters the error bound")
     return replace(
-        cert, conditions=tuple(conds), scale=scale, a_U=rate, mu=mu, error_bound=bound, notes=tuple(notes)
+        cert,
+        conditions=tuple(conds),
+        scale=scale,
+        a_U=rate,
+        mu=mu,
+        d_U=tuple(d2),
+        error_bound=bound,
+        notes=tuple(notes),
     )
 
 
@@ -363,20 +391,14 @@ def propose_rules(
         raise InputError("give either `nu` (Theorem 1) or both `a_U` and `mu` (Theorem 2)")
     if nu is not None:
         v.real("nu", nu, lower=0.0, lower_open=True)
-        alphas = (
-            [v.real(f"a[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(a)] if a else [1.0] * N
-        )
+        alphas = _alphas(a, N) or [1.0] * N
         d = [2 * s_ / (1 - s_ * c_) if s_ > 0 else 1.0 for s_, c_ in zip(sig, cs, strict=True)]
         eps = [nu / (N * (1 + di * c_)) for di, c_ in zip(d, cs, strict=True)]
         out = {"nu": nu}
     else:
         rate = v.real("a_U", a_U, lower=0.0, lower_open=True, upper=iss.a)
         bound = v.real("mu", mu, lower=0.0, lower_open=True)
-        alphas = (
-            [v.real(f"a[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(a)]
-            if a
-            else [2 * rate / (1 - s_ * c_) for s_, c_ in zip(sig, cs, strict=True)]
-        )
+        alphas = _alphas(a, N) or [2 * rate / (1 - s_ * c_) for s_, c_ in zip(sig, cs, strict=True)]
         for i, (s_, c_, ai) in enumerate(zip(sig, cs, alphas, strict=True)):
             if ai <= rate / (1 - s_ * c_):
                 raise InputError(
@@ -391,3 +413,13 @@ def propose_rules(
         for k, ai, s_, c_, e in zip(iss.k, alphas, sig, cs, eps, strict=True)
     )
     return RuleProposal(rules=rules, d=tuple(d), **out)
+
+
+def _alphas(a: Sequence[float] | None, n: int) -> list[float]:
+    """The given ``a_i`` (validated), or ``[]`` when none are given."""
+    if a is None:
+        return []
+    out = [v.real(f"a[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(a)]
+    if len(out) != n:
+        raise InputError(f"`a` must have one value per node ({n}); got {len(out)}")
+    return out

@@ -118,6 +118,12 @@ def quadratic_iss_gains(
         if not ix or any(not 0 <= j < n_y for j in ix):
             raise InputError(f"`nodes[{i}]` must list output indices in 0..{n_y - 1}; got {ix}")
         cols.append(ix)
+    covered = sorted(j for ix in cols for j in ix)
+    if covered != list(range(n_y)):
+        raise InputError(
+            f"`nodes` must share out the outputs 0..{n_y - 1} of L, each exactly once (every column of L "
+            f"enters the error dynamics); got {[list(ix) for ix in cols]}"
+        )
     lam_q = float(np.linalg.eigvalsh(gain.Q).min())
     spare = lam_q - c_v - sum(cs)
     if spare <= 0:
@@ -142,5 +148,6 @@ def quadratic_iss_gains(
 def even_split(gain: ObserverGain, n_nodes: int, share: float = 0.5) -> tuple[float, list[float]]:
     """Split constants spending ``share`` of ``lambda_min(Q)`` evenly on ``v`` and the nodes."""
     v.real("share", share, lower=0.0, upper=1.0, lower_open=True, upper_open=True)
+    v.integer("n_nodes", n_nodes, lower=1)
     part = share * float(np.linalg.eigvalsh(gain.Q).min()) / (n_nodes + 1)
     return part, [part] * n_nodes

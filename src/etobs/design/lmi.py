@@ -180,17 +180,20 @@ def observer_gain(
     # The solver meets the inequalities up to its own accuracy, relative to the size of
     # P and W; a margin below that accuracy does not survive the eigenvalue re-check, so
     # the margin grows tenfold until the answer passes (or is a sizeable share of Q).
-    out = None
+    cap = 1e-2 * float(np.linalg.eigvalsh(Qm).min())
+    if margin > cap:
+        raise InputError(f"`margin` must be <= 1 % of lambda_min(Q) = {cap:g}; got {margin:g}")
     mu = float(margin)
-    while mu <= 1e-2 * float(np.linalg.eigvalsh(Qm).min()):
+    while True:
         out = _design(cp, Am, Cm, verts, Qm, mu, objective, max_gain, solver)
         if out.ok:
             return out
+        if mu * 10 > cap:
+            break
         mu *= 10
-    assert out is not None
     raise DesignError(
         f"the solver's answer fails the eigenvalue re-check (solver status {out.solver_status!r}) with "
-        f"margins up to {mu / 10:g}: largest vertex residual {out.residuals.max():.3g} (must be < 0); "
+        f"margins up to {mu:g}: largest vertex residual {out.residuals.max():.3g} (must be < 0); "
         "try another solver or a smaller `max_gain`"
     )
 
@@ -255,6 +258,7 @@ def check_gain(
     cp = _cvxpy()
     Am, Cm, verts, Qm = _system(A, C, vertices, Q)
     Lm = v.matrix("L", L, (Am.shape[0], Cm.shape[0]))
+    v.real("margin", margin, lower=0.0, lower_open=True)
     n = Am.shape[0]
     P = cp.Variable((n, n), symmetric=True)
     s = cp.Variable()
