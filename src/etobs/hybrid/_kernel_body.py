@@ -169,6 +169,8 @@ def _solve_one(
     n_s = max(S - 1, 0)
     th_s = np.empty(n_s + 2)
     gs = np.empty((n_s + 2, m))
+    # what _jump_until_flow needs besides the changing (t, x, j, nlog, narc)
+    ctx = (args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers)
     t = t0
     j = 0
     st = RUNNING
@@ -185,36 +187,14 @@ def _solve_one(
         gnext += 1
 
     if keep_steps:
-        if narc < arc_cap:
-            arc_t[slot, narc] = t
-            arc_j[slot, narc] = j
-            arc_x[slot, narc, :] = x
-        narc += 1
+        narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
     while gnext < n_grid and grid[gnext] <= t:
         grid_x[run, gnext, :] = x
         grid_j[run, gnext] = j
         gnext += 1
 
     # jumps at t0
-    st, j, nlog, narc = _jump_until_flow(
-        args,
-        p,
-        t,
-        x,
-        g,
-        f,
-        t_end,
-        m,
-        j,
-        max_jumps,
-        nlog,
-        narc,
-        keep_steps,
-        log_cap,
-        arc_cap,
-        slot,
-        buffers,
-    )
+    st, j, nlog, narc = _jump_until_flow(ctx, t, x, j, nlog, narc)
     if st == RUNNING:
         if first_step > 0.0:
             h = first_step
@@ -310,31 +290,9 @@ def _solve_one(
             for q in range(n):
                 x[q] = x_new[q]
             if keep_steps:
-                if narc < arc_cap:
-                    arc_t[slot, narc] = t
-                    arc_j[slot, narc] = j
-                    arc_x[slot, narc, :] = x
-                narc += 1
+                narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
             if np.isfinite(theta_ev):
-                st, j, nlog, narc = _jump_until_flow(
-                    args,
-                    p,
-                    t,
-                    x,
-                    g,
-                    f,
-                    t_end,
-                    m,
-                    j,
-                    max_jumps,
-                    nlog,
-                    narc,
-                    keep_steps,
-                    log_cap,
-                    arc_cap,
-                    slot,
-                    buffers,
-                )
+                st, j, nlog, narc = _jump_until_flow(ctx, t, x, j, nlog, narc)
             else:
                 for q in range(n):
                     f[q] = K[s, q]
@@ -356,32 +314,16 @@ def _solve_one(
 
 
 @jit
-def _jump_until_flow(
-    args,
-    p,
-    t,
-    x,
-    g,
-    f,
-    t_end,
-    m,
-    j,
-    max_jumps,
-    nlog,
-    narc,
-    keep_steps,
-    log_cap,
-    arc_cap,
-    slot,
-    buffers,
-):
+def _jump_until_flow(ctx, t, x, j, nlog, narc):
     """Apply jumps until every event function is negative, then refresh ``f = flow(t, x)``.
 
     Returns (status, j, nlog, narc); the status is ``completed`` at ``t_end`` and
-    ``nonfinite`` when the state or its derivative is not finite. ``buffers`` holds
-    the jump log and arc arrays ``(log_rule, log_t, log_j, arc_t, arc_j, arc_x)``.
+    ``nonfinite`` when the state or its derivative is not finite. ``ctx`` is the run's
+    fixed context (see ``_solve_one``); its ``buffers`` hold the jump log and arc arrays
+    ``(log_rule, log_t, log_j, arc_t, arc_j, arc_x)``.
     """
-    log_rule, log_t, log_j, arc_t, arc_j, arc_x = buffers
+    args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers = ctx
+    log_rule, log_t, log_j = buffers[0], buffers[1], buffers[2]
     while m > 0:
         guard_call(t, x, p, args[0], args[1], g)
         if not _any_nonneg(g):
@@ -399,11 +341,7 @@ def _jump_until_flow(
             nlog += 1
             j += 1
             if keep_steps:
-                if narc < arc_cap:
-                    arc_t[slot, narc] = t
-                    arc_j[slot, narc] = j
-                    arc_x[slot, narc, :] = x
-                narc += 1
+                narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
     flow_call(t, x, p, args[0], args[1], f)
@@ -412,6 +350,16 @@ def _jump_until_flow(
     if not _all_finite(f):
         return NONFINITE, j, nlog, narc
     return RUNNING, j, nlog, narc
+
+
+@jit
+def _record_arc(buffers, slot, arc_cap, narc, t, j, x):
+    """Keep ``(t, j, x)`` as the arc's point ``narc`` if there is room; count it anyway."""
+    if narc < arc_cap:
+        buffers[3][slot, narc] = t
+        buffers[4][slot, narc] = j
+        buffers[5][slot, narc, :] = x
+    return narc + 1
 
 
 @jit

@@ -18,11 +18,11 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.model.functions import KFunction, Linear, as_kfunction
-from etobs.model.rules import TriggerRule, _norm
+from etobs.model.rules import EtaRule, _norm
 
 
 @dataclass(frozen=True)
-class GeneralizedRule(TriggerRule):
+class GeneralizedRule(EtaRule):
     """Section 6.1's rule: any ``alpha_check``, ``gamma_check`` and weight ``d'``.
 
     Parameters
@@ -77,16 +77,7 @@ class GeneralizedRule(TriggerRule):
         object.__setattr__(
             self, "sigma", v.real("sigma", self.sigma, lower=0.0, upper=1.0, lower_open=True, upper_open=True)
         )
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
-        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
-        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
-
-    @property
-    def n_state(self) -> int:
-        return 1
-
-    def initial_state(self) -> np.ndarray:
-        return np.array([self.eta0])
+        self._check_eta_params()
 
     def weight(self, eta: np.ndarray) -> np.ndarray:
         """``d'(eta)``."""
@@ -103,6 +94,3 @@ class GeneralizedRule(TriggerRule):
         eta, r = s[:, 0], _norm(e)
         w = self.weight(eta)
         return self.gamma(r) + w * self.gamma_check(r) - self.sigma * w * self.alpha_check(eta) - self.eps
-
-    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return self.b * s

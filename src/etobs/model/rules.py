@@ -57,8 +57,36 @@ class TriggerRule(ABC):
         """Internal state right after the node's own transmission."""
 
 
+class EtaRule(TriggerRule):
+    """Base of the rules with a scalar filter state ``eta`` reset as ``eta+ = b*eta``.
+
+    Subclasses are frozen dataclasses with fields ``b``, ``eps`` and ``eta0``.
+    """
+
+    b: float
+    eps: float
+    eta0: float
+
+    def _check_eta_params(self) -> None:
+        """Validate ``b`` in [0, 1], ``eps > 0`` and ``eta0 >= 0`` (frozen: set in place)."""
+        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
+
+    @property
+    def n_state(self) -> int:
+        return 1
+
+    def initial_state(self) -> np.ndarray:
+        return np.array([self.eta0])
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        # eq. (14): eta+ = b*eta at the node's own transmission
+        return self.b * s
+
+
 @dataclass(frozen=True)
-class DynamicRule(TriggerRule):
+class DynamicRule(EtaRule):
     """The paper's dynamic triggering rule, eq. (14)--(15).
 
     ``eta' = -alpha(eta) + c*gamma(|e|)`` along flows, ``eta+ = b*eta`` at the node's
@@ -105,16 +133,7 @@ class DynamicRule(TriggerRule):
         object.__setattr__(self, "alpha", as_kfunction("alpha", self.alpha))
         object.__setattr__(self, "sigma", v.real("sigma", self.sigma, lower=0.0))
         object.__setattr__(self, "c", v.real("c", self.c, lower=0.0))
-        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
-        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
-
-    @property
-    def n_state(self) -> int:
-        return 1
-
-    def initial_state(self) -> np.ndarray:
-        return np.array([self.eta0])
+        self._check_eta_params()
 
     def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
         # eq. (14): eta' = -alpha(eta) + c*gamma(|e|)
@@ -124,10 +143,6 @@ class DynamicRule(TriggerRule):
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
         # eq. (15): transmit when gamma(|e|) >= sigma*alpha(eta) + eps
         return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
-
-    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        # eq. (14): eta+ = b*eta at the node's own transmission
-        return self.b * s
 
 
 @dataclass(frozen=True)
