@@ -1,6 +1,7 @@
 """The paper's event-triggered estimator assembled as a hybrid system, its simulation and metrics."""
 
 from etobs.estimation.metrics import (
+    input_transmission_counts,
     inter_event_times,
     max_estimation_error,
     min_inter_event_time,
@@ -15,6 +16,7 @@ __all__ = [
     "EstimationResult",
     "StateLayout",
     "Trajectory",
+    "input_transmission_counts",
     "inter_event_times",
     "max_estimation_error",
     "min_inter_event_time",

@@ -61,6 +61,20 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     """
     require_numba("backend='numba'")
     plant, obs = problem.plant, problem.observer
+    if problem.extended:
+        used = [
+            what
+            for what, on in (
+                ("input_nodes (section 6.3)", bool(problem.input_nodes)),
+                (f"hold={problem.hold!r} (Remark 3)", problem.hold != "output"),
+                ("a network (delay, loss)", problem.network is not None),
+            )
+            if on
+        ]
+        raise InputError(
+            f"backend='numba' models the paper's base setting only; this problem uses {', '.join(used)}: "
+            "use backend='fast'"
+        )
     if plant.jit is None:
         raise InputError(
             f"backend='numba' needs compiled plant functions: give Plant(jit=JitPlant(f_p, h)); "

@@ -34,9 +34,26 @@ def transmission_counts(result: EstimationResult, window: Any = None) -> np.ndar
     """
     lo, hi = _window(window, result)
     log = result.transmissions
-    keep = (log.t >= lo) & (log.t <= hi)
+    keep = (log.t >= lo) & (log.t <= hi) & (log.rule < result.n_nodes)
     out = np.zeros((result.n_runs, result.n_nodes), dtype=np.int64)
     np.add.at(out, (log.run[keep], log.rule[keep]), 1)
+    return out
+
+
+def input_transmission_counts(result: EstimationResult, window: Any = None) -> np.ndarray:
+    """Transmissions of each input node (section 6.3) in ``window``, counted apart from the outputs'.
+
+    Returns
+    -------
+    ndarray of int, shape (B, number of input nodes)
+
+    """
+    lo, hi = _window(window, result)
+    log = result.transmissions
+    n = result.n_nodes
+    keep = (log.t >= lo) & (log.t <= hi) & (log.rule >= n)
+    out = np.zeros((result.n_runs, len(result.problem.input_nodes)), dtype=np.int64)
+    np.add.at(out, (log.run[keep], log.rule[keep] - n), 1)
     return out
 
 

@@ -1,7 +1,10 @@
 """The event-triggered estimation problem and its hybrid model, eq. (16)--(22).
 
-The hybrid state is ``q = (x, z, ybar, s_0, ..., s_{N-1})`` where ``s_i`` is the
-internal state of node ``i``'s rule (``eta_i`` for the dynamic rule). We carry the held
+The hybrid state is ``q = (x, z, ybar, ubar, s_0, ..., s_{C-1}, [network], [run])``
+where ``s_c`` is the internal state of node ``c``'s rule (``eta`` for the dynamic rule),
+``ubar`` the held inputs of the input nodes (section 6.3, empty without them), and the
+network part (only with a :class:`~etobs.model.network.Network`) the values the nodes
+last sent, their packets in flight and counters, and the run's index. We carry the held
 value ``ybar`` rather than the paper's ``e``: ``e_i = ybar_i - ytilde_i(t)`` is then
 exact at every instant and ``ybar`` is constant along flows (eq. (4)), so the paper's
 ``e``-dynamics (eq. (9)) follow without being integrated.
@@ -9,6 +12,7 @@ exact at every instant and ``ybar`` is constant along flows (eq. (4)), so the pa
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,8 +20,10 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError, InputTypeError, ModelError
+from etobs.estimation.assembly import N_META, Channel
 from etobs.hybrid.system import HybridSystem
-from etobs.model.node import Node
+from etobs.model.network import Network
+from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
 from etobs.model.signals import Signal, Sinusoid, as_signal
@@ -30,8 +36,11 @@ class StateLayout:
     x: slice
     z: slice
     ybar: slice
+    ubar: slice
     rule: tuple[slice, ...]
     outputs: tuple[np.ndarray, ...]
+    channels: tuple[Channel, ...]
+    run: int | None
     n: int
 
 
@@ -51,6 +60,19 @@ class EstimationProblem:
         Unknown disturbance ``v(t)`` (dimension ``n_v``).
     m : Signal, callable, array_like or None
         Measurement noise ``m(t)`` (dimension ``n_y``), eq. (46): ``ytilde = h(x) + m``.
+    input_nodes : sequence of InputNode, optional
+        Section 6.3: nodes that send components of ``u`` to the observer by their own
+        rules; the observer runs on the held ``ubar`` for those components. Their sets
+        must be disjoint.
+    hold : {"output", "innovation"}
+        ``"output"`` (the paper): the observer holds the outputs sent. ``"innovation"``:
+        the observer-copy variant of Remark 3, where node ``i`` runs a copy of the
+        observer and sends the output estimation error ``ytilde_i - yhat_i``; the
+        observer holds it and its rule acts on ``(ybar_i - yhat_i)_sent - (ytilde_i -
+        yhat_i)``. Simulated with a perfect copy (the observer's own ``yhat``).
+    network : Network, optional
+        Delays and losses between the nodes and the observer (not in the paper; see
+        :mod:`etobs.model.network`). Default: the paper's ideal network.
 
     """
 
@@ -60,6 +82,9 @@ class EstimationProblem:
     u: Any = None
     v: Any = None
     m: Any = None
+    input_nodes: tuple[InputNode, ...] = ()
+    hold: str = "output"
+    network: Network | None = None
     layout: StateLayout = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -77,10 +102,25 @@ class EstimationProblem:
                 f"observer `n_z` = {self.observer.n_z} is smaller than the plant's n_x = {p.n_x}"
             )
         _check_partition(nodes, p.n_y)
+        inputs = tuple(self.input_nodes)
+        if not all(isinstance(nd, InputNode) for nd in inputs):
+            raise InputTypeError("`input_nodes` must be a sequence of InputNode objects")
+        object.__setattr__(self, "input_nodes", inputs)
+        _check_inputs(inputs, p.n_u)
+        if self.hold not in ("output", "innovation"):
+            raise InputError(f"`hold` must be 'output' or 'innovation'; got {self.hold!r}")
+        if self.network is not None and not isinstance(self.network, Network):
+            raise InputTypeError(f"`network` must be a Network or None; got {type(self.network).__name__}")
+        if self.network is not None and self.hold == "innovation":
+            raise InputError(
+                "`hold='innovation'` (Remark 3) assumes every node's observer copy equals the observer; "
+                "with a lossy or delayed `network` the copies would diverge, which is not simulated: "
+                "use hold='output' with a network"
+            )
         object.__setattr__(self, "u", as_signal("u", self.u, p.n_u))
         object.__setattr__(self, "v", as_signal("v", self.v, p.n_v))
         object.__setattr__(self, "m", as_signal("m", self.m, p.n_y))
-        object.__setattr__(self, "layout", _layout(p, self.observer, nodes))
+        object.__setattr__(self, "layout", _layout(p, self.observer, nodes, inputs, self.network))
         _check_shapes(self)
         _check_noise(self)
 
@@ -88,6 +128,21 @@ class EstimationProblem:
     def n_nodes(self) -> int:
         """Number of sensor nodes ``N``."""
         return len(self.nodes)
+
+    @property
+    def n_channels(self) -> int:
+        """Number of nodes of every kind: ``N`` output nodes, then the input nodes."""
+        return len(self.nodes) + len(self.input_nodes)
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        """Names of the output nodes, then the input nodes."""
+        return tuple(ch.name for ch in self.layout.channels)
+
+    @property
+    def extended(self) -> bool:
+        """Whether the problem uses an extension the compiled backend does not model."""
+        return bool(self.input_nodes) or self.hold != "output" or self.network is not None
 
     def psi(self, z: np.ndarray) -> np.ndarray:
         """State estimate ``xhat = psi(z)``."""
@@ -101,57 +156,46 @@ class EstimationProblem:
         return self.plant.h(x) + m(t)
 
     def initial_state(self, x0: np.ndarray, z0: np.ndarray, e0: np.ndarray, t0: float) -> np.ndarray:
-        """Hybrid state at ``t0``: ``ybar = ytilde(t0) + e0`` and each rule's own start."""
+        """Hybrid state at ``t0``: ``ybar = ytilde(t0) + e0`` and each rule's own start.
+
+        The held inputs start exact, ``ubar(t0) = u(t0)``; the observer-copy variant
+        holds ``ytilde(t0) - yhat(t0) + e0``. With a network the nodes' sent values
+        equal the held ones, no packet is in flight, and run ``b`` of the batch draws its
+        packets' fates from the stream ``(seed, b, node)``.
+        """
+        from etobs.estimation.assembly import EMPTY, slot_columns
+
         b = x0.shape[0]
         lay = self.layout
-        q = np.empty((b, lay.n))
+        tt = np.full(b, t0)
+        q = np.zeros((b, lay.n))
         q[:, lay.x] = x0
         q[:, lay.z] = z0
-        q[:, lay.ybar] = self.ytilde(np.full(b, t0), x0) + e0
-        for nd, sl in zip(self.nodes, lay.rule, strict=True):
-            q[:, sl] = nd.rule.initial_state()
+        ybar = self.ytilde(tt, x0) + e0
+        if self.hold == "innovation":
+            ybar = ybar - self.plant.h(self.psi(z0))
+        q[:, lay.ybar] = ybar
+        u0 = self.u(tt)
+        for ch in lay.channels:
+            if ch.kind == "u":
+                q[:, ch.held] = u0[:, ch.index]
+            q[:, ch.rule_state] = ch.rule.initial_state()
+            q[:, ch.sent] = q[:, ch.held]
+            if ch.net is not None:
+                q[:, slot_columns(ch)[0]] = EMPTY
+        if lay.run is not None:
+            q[:, lay.run] = np.arange(b)
         return q
 
     def hybrid_system(self) -> HybridSystem:
-        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.HybridSystem`."""
-        lay, plant, obs = self.layout, self.plant, self.observer
-        nodes = self.nodes
-        u_sig: Signal = self.u
-        v_sig: Signal = self.v
+        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.HybridSystem`.
 
-        def flow(t: np.ndarray, q: np.ndarray) -> np.ndarray:
-            x, z, ybar = q[:, lay.x], q[:, lay.z], q[:, lay.ybar]
-            u = u_sig(t)
-            out = np.zeros_like(q)
-            out[:, lay.x] = plant.f_p(t, x, u, v_sig(t))  # eq. (2)
-            yhat = plant.h(self.psi(z))
-            out[:, lay.z] = obs.f_o(t, z, u, ybar, yhat)  # eq. (7): the observer runs on ybar
-            e = ybar - self.ytilde(t, x)
-            for nd, sl, idx in zip(nodes, lay.rule, lay.outputs, strict=True):
-                if sl.stop > sl.start:
-                    out[:, sl] = nd.rule.derivative(t, e[:, idx], q[:, sl])  # eq. (14)
-            return out
+        Jump rules ``0 .. C-1`` are the nodes' transmissions (output nodes, then input
+        nodes); with a network, rules ``C .. 2C-1`` deliver their packets.
+        """
+        from etobs.estimation.assembly import build_system
 
-        def guard(t: np.ndarray, q: np.ndarray) -> np.ndarray:
-            e = q[:, lay.ybar] - self.ytilde(t, q[:, lay.x])
-            g = np.empty((q.shape[0], len(nodes)))
-            for i, (nd, sl, idx) in enumerate(zip(nodes, lay.rule, lay.outputs, strict=True)):
-                g[:, i] = nd.rule.trigger(t, e[:, idx], q[:, sl])  # eq. (18), (20)
-            return g
-
-        def jump(i: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
-            # eq. (22): node i sends ytilde_i (e_i+ = 0) and resets its own rule state;
-            # every other node is untouched.
-            qn = q.copy()
-            idx = lay.outputs[i]
-            ybar_idx = lay.ybar.start + idx
-            qn[:, ybar_idx] = self.ytilde(t, q[:, lay.x])[:, idx]
-            sl = lay.rule[i]
-            qn[:, sl] = nodes[i].rule.reset(t, q[:, sl])
-            return qn
-
-        names = tuple(nd.name or f"node{i}" for i, nd in enumerate(nodes))
-        return HybridSystem(n=lay.n, n_rules=len(nodes), flow=flow, guard=guard, jump=jump, rule_names=names)
+        return build_system(self)
 
 
 def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:
@@ -175,7 +219,26 @@ def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:
         )
 
 
-def _layout(plant: Plant, obs: Observer, nodes: tuple[Node, ...]) -> StateLayout:
+def _check_inputs(nodes: tuple[InputNode, ...], n_u: int) -> None:
+    seen: dict[int, int] = {}
+    for i, nd in enumerate(nodes):
+        for k in nd.inputs:
+            if k >= n_u:
+                raise InputError(f"input node {i} sends input {k}, which does not exist (n_u = {n_u})")
+            if k in seen:
+                raise InputError(
+                    f"input {k} is sent by input nodes {seen[k]} and {i}; each input by one node"
+                )
+            seen[k] = i
+
+
+def _layout(
+    plant: Plant,
+    obs: Observer,
+    nodes: tuple[Node, ...],
+    inputs: tuple[InputNode, ...],
+    network: Network | None,
+) -> StateLayout:
     k = 0
 
     def take(size: int) -> slice:
@@ -184,10 +247,44 @@ def _layout(plant: Plant, obs: Observer, nodes: tuple[Node, ...]) -> StateLayout
         k += size
         return sl
 
-    x, z, ybar = take(plant.n_x), take(obs.n_z), take(plant.n_y)
-    rule = tuple(take(nd.rule.n_state) for nd in nodes)
+    n_ubar = sum(len(nd.inputs) for nd in inputs)
+    x, z, ybar, ubar = take(plant.n_x), take(obs.n_z), take(plant.n_y), take(n_ubar)
+    everyone: list[Node | InputNode] = [*nodes, *inputs]
+    rule = tuple(take(nd.rule.n_state) for nd in everyone)
     outputs = tuple(np.array(nd.outputs, dtype=np.intp) for nd in nodes)
-    return StateLayout(x=x, z=z, ybar=ybar, rule=rule, outputs=outputs, n=k)
+    index = [*outputs, *(np.array(nd.inputs, dtype=np.intp) for nd in inputs)]
+    held: list[np.ndarray] = [ybar.start + idx for idx in outputs]
+    offsets = np.cumsum([0] + [len(nd.inputs) for nd in inputs])
+    held += [ubar.start + np.arange(a, b) for a, b in itertools.pairwise(offsets)]
+    n_ch = len(everyone)
+    sent, nets, links = list(held), [None] * n_ch, [None] * n_ch
+    if network is not None:
+        sent_block = take(plant.n_y + n_ubar)
+        sent = [h - ybar.start + sent_block.start for h in held]
+        for c, idx in enumerate(index):
+            link = network.link(c, n_ch)
+            links[c] = link  # type: ignore[call-overload]
+            nets[c] = take(N_META + link.capacity * (2 + idx.shape[0]))  # type: ignore[call-overload]
+    run = take(1).start if network is not None else None
+    names = [nd.name or f"node{i}" for i, nd in enumerate(nodes)]
+    names += [nd.name or f"input{i}" for i, nd in enumerate(inputs)]
+    channels = tuple(
+        Channel(
+            name=names[c],
+            rule=everyone[c].rule,
+            kind="y" if c < len(nodes) else "u",
+            index=index[c],
+            held=held[c],
+            sent=sent[c],
+            rule_state=rule[c],
+            net=nets[c],
+            link=links[c],
+        )
+        for c in range(n_ch)
+    )
+    return StateLayout(
+        x=x, z=z, ybar=ybar, ubar=ubar, rule=rule, outputs=outputs, channels=channels, run=run, n=k
+    )
 
 
 def _check_shapes(pb: EstimationProblem) -> None:

@@ -23,10 +23,13 @@ class Trajectory:
     t, j : ndarray
         Hybrid times.
     x, z, xhat, ybar, e : ndarray
-        Plant state, observer state, estimate ``psi(z)``, held outputs, and
-        network-induced error ``e = ybar - ytilde`` (eq. (46)).
+        Plant state, observer state, estimate ``psi(z)``, held outputs as the observer
+        holds them, and network-induced error ``e = ybar - ytilde`` (eq. (46)). In the
+        observer-copy variant (``hold="innovation"``) ``ybar`` holds
+        ``ytilde - yhat`` as sent and ``e = ybar - (ytilde - yhat)``.
     eta : ndarray
-        ``eta_i`` of each node (first entry of its rule state; NaN for stateless rules).
+        ``eta_i`` of each node (first entry of its rule state; NaN for stateless rules),
+        output nodes then input nodes.
 
     """
 
@@ -72,8 +75,57 @@ class EstimationResult:
 
     @property
     def transmissions(self) -> JumpLog:
-        """Every transmission: ``(run, rule=node, t, j)`` rows sorted by run then ``j``."""
-        return self.solution.jumps
+        """Every transmission: ``(run, rule=node, t, j)`` rows sorted by run then ``j``.
+
+        ``rule`` is the node: ``0 .. N-1`` the output nodes, then the input nodes
+        (section 6.3). With a network this counts packets *sent*, received or not.
+        """
+        log = self.solution.jumps
+        if self.problem.network is None:
+            return log
+        keep = log.rule < self.problem.n_channels
+        return JumpLog(log.run[keep], log.rule[keep], log.t[keep], log.j[keep])
+
+    @property
+    def deliveries(self) -> JumpLog:
+        """Packets reaching the observer after a delay: ``(run, rule=node, t, j)`` rows.
+
+        Empty without a network. A packet of a zero-delay link is applied within its
+        transmission's jump and has no row here; a stale packet (older than the last
+        one applied) has a row but was not applied (see :meth:`network_stats`).
+        """
+        log = self.solution.jumps
+        keep = log.rule >= self.problem.n_channels
+        return JumpLog(log.run[keep], log.rule[keep] - self.problem.n_channels, log.t[keep], log.j[keep])
+
+    def network_stats(self) -> dict[str, np.ndarray]:
+        """Fate of every node's packets over the whole run, arrays of shape ``(B, C)``.
+
+        Keys: ``sent``; ``lost`` (by the loss process); ``overflow`` (dropped at a full
+        link); ``stale`` (arrived after a newer packet, dropped); ``in_flight`` (not
+        arrived by the end of the run); ``applied`` (used by the observer). The counts add
+        up: ``sent = lost + overflow + stale + in_flight + applied``.
+        """
+        pb = self.problem
+        if pb.network is None:
+            raise InputError("this problem has no network: give EstimationProblem(network=Network(...))")
+        from etobs.estimation.assembly import EMPTY, LOST, OVERFLOW, STALE, slot_columns
+
+        q = self.solution.x_final
+        C = pb.n_channels
+        out = {
+            k: np.zeros((self.n_runs, C), dtype=np.int64) for k in ("lost", "overflow", "stale", "in_flight")
+        }
+        sent = self.transmissions.counts(self.n_runs, C)
+        for c, ch in enumerate(pb.layout.channels):
+            assert ch.net is not None
+            meta = ch.net.start
+            out["lost"][:, c] = q[:, meta + LOST]
+            out["overflow"][:, c] = q[:, meta + OVERFLOW]
+            out["stale"][:, c] = q[:, meta + STALE]
+            out["in_flight"][:, c] = np.sum(q[:, slot_columns(ch)[0]] < EMPTY, axis=1)
+        applied = sent - out["lost"] - out["overflow"] - out["stale"] - out["in_flight"]
+        return {"sent": sent, **out, "applied": applied}
 
     def status_labels(self) -> list[str]:
         """Status of each run (``"completed"``, ``"max_jumps"``, ...)."""
@@ -113,7 +165,9 @@ class EstimationResult:
         with np.errstate(invalid="ignore"):
             e = ybar - pb.ytilde(tf, x)
             xhat = pb.psi(z)
-        eta = np.full((flat.shape[0], pb.n_nodes), np.nan)
+            if pb.hold == "innovation":  # ybar holds ytilde - yhat as sent (Remark 3)
+                e = e + pb.plant.h(xhat)
+        eta = np.full((flat.shape[0], pb.n_channels), np.nan)
         for i, sl in enumerate(lay.rule):
             if sl.stop > sl.start:
                 eta[:, i] = flat[:, sl.start]

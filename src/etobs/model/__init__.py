@@ -4,32 +4,50 @@ from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
 from etobs.model.generalized import GeneralizedRule
 from etobs.model.high_gain import high_gain_gain, high_gain_observer
 from etobs.model.kalman import ekf_initial_state, extended_kalman_filter
-from etobs.model.node import Node
+from etobs.model.network import (
+    BernoulliLoss,
+    ConstantDelay,
+    ExponentialDelay,
+    GilbertElliottLoss,
+    Link,
+    Network,
+    UniformDelay,
+)
+from etobs.model.node import InputNode, Node
 from etobs.model.observer import JitObserver, Observer, luenberger
 from etobs.model.plant import JitPlant, Plant
-from etobs.model.rules import DynamicRule, PeriodicRule, StaticRule, TriggerRule, send_on_delta
+from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
 __all__ = [
+    "BernoulliLoss",
     "Constant",
+    "ConstantDelay",
     "Custom",
     "DynamicRule",
+    "ExponentialDelay",
     "FunctionSignal",
     "GeneralizedRule",
+    "GilbertElliottLoss",
+    "InputNode",
     "JitObserver",
     "JitPlant",
     "KFunction",
     "Linear",
+    "Link",
+    "Network",
     "Node",
     "Observer",
     "PeriodicRule",
     "Plant",
     "Power",
     "Quadratic",
+    "RelativeRule",
     "Signal",
     "Sinusoid",
     "StaticRule",
     "TriggerRule",
+    "UniformDelay",
     "Zero",
     "ekf_initial_state",
     "extended_kalman_filter",

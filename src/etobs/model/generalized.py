@@ -85,11 +85,13 @@ class GeneralizedRule(EtaRule):
             return np.full_like(eta, self.d_prime)
         return self.d_prime(eta)
 
-    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
         # eq. (44): eta' = -alpha_check(eta) + gamma_check(|e|)
         return (-self.alpha_check(s[:, 0]) + self.gamma_check(_norm(e)))[:, None]
 
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
         eta, r = s[:, 0], _norm(e)
         w = self.weight(eta)

@@ -27,3 +27,24 @@ class Node:
                 f"`rule` must be a TriggerRule (DynamicRule, StaticRule, PeriodicRule); "
                 f"got {type(self.rule).__name__}"
             )
+
+
+@dataclass(frozen=True)
+class InputNode:
+    """An input node (section 6.3): sends the plant input ``u[inputs]`` to the observer.
+
+    The observer then runs on the held ``ubar`` in place of ``u`` for these components,
+    eq. (50), and the node transmits by its own rule acting on ``e_u = ubar - u``,
+    eq. (52)--(53) (e.g. a :class:`~etobs.model.DynamicRule` with ``gamma_u``,
+    ``alpha_u``, ``sigma_u``, ``c_u``, ``b_u``, ``eps_u``). Components of ``u`` that no
+    input node sends reach the observer exactly, as in the base setting.
+    """
+
+    inputs: tuple[int, ...]
+    rule: TriggerRule
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inputs", v.index_tuple("inputs", self.inputs))
+        if not isinstance(self.rule, TriggerRule):
+            raise InputTypeError(f"`rule` must be a TriggerRule; got {type(self.rule).__name__}")

@@ -1,17 +1,19 @@
 """Triggering rules of the sensor nodes.
 
 A rule sees only its own node: the gap ``e_i = ybar_i - ytilde_i`` between the value
-last sent and the current measurement, and its own internal state ``s_i`` (``eta_i``
-for the paper's dynamic rule, a clock for the periodic rule, nothing for the static
-rule). It defines
+last sent and the current measurement, its own internal state ``s_i`` (``eta_i`` for
+the paper's dynamic rule, a clock for the periodic rule, nothing for the static rule)
+and, for rules that need it, the current measurement ``y = ytilde_i`` itself (the
+relative-threshold rule). It defines
 
-* ``derivative(t, e, s)``: ``s_i'`` along flows;
-* ``trigger(t, e, s)``: the trigger function; the node transmits when it is ``>= 0``;
+* ``derivative(t, e, s, y)``: ``s_i'`` along flows;
+* ``trigger(t, e, s, y)``: the trigger function; the node transmits when it is ``>= 0``;
 * ``reset(t, s)``: ``s_i+`` at the node's own transmission.
 
-All methods are vectorized over runs: ``t`` has shape ``(B,)``, ``e`` ``(B, n_yi)`` and
-``s`` ``(B, n_state)``. The same objects drive the simulator and, later, the deployed
-sensor nodes.
+All methods are vectorized over runs: ``t`` has shape ``(B,)``, ``e`` and ``y``
+``(B, n_yi)`` and ``s`` ``(B, n_state)``. ``y`` may be omitted (``None``) for every
+rule that does not read it. The same objects drive the simulator and the deployed
+sensor nodes; an input node (section 6.3) runs the same rules on ``e_u = ubar - u``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from etobs import _validate as v
+from etobs.errors import InputError
 from etobs.model.functions import KFunction, Linear, as_kfunction
 
 
@@ -45,11 +48,13 @@ class TriggerRule(ABC):
         """The internal state at ``t = 0``, shape ``(n_state,)``."""
 
     @abstractmethod
-    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
         """``s'`` along flows, shape ``(B, n_state)``."""
 
     @abstractmethod
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """Trigger function, shape ``(B,)``: transmit when ``>= 0``."""
 
     @abstractmethod
@@ -135,12 +140,14 @@ class DynamicRule(EtaRule):
         object.__setattr__(self, "c", v.real("c", self.c, lower=0.0))
         self._check_eta_params()
 
-    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
         # eq. (14): eta' = -alpha(eta) + c*gamma(|e|)
         eta = s[:, 0]
         return (-self.alpha(eta) + self.c * self.gamma(_norm(e)))[:, None]
 
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         # eq. (15): transmit when gamma(|e|) >= sigma*alpha(eta) + eps
         return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
 
@@ -167,10 +174,12 @@ class StaticRule(TriggerRule):
     def initial_state(self) -> np.ndarray:
         return np.empty(0)
 
-    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
         return np.empty((t.shape[0], 0))
 
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         return self.gamma(_norm(e)) - self.eps
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -221,11 +230,63 @@ class PeriodicRule(TriggerRule):
         assert self.first is not None  # set in __post_init__
         return np.array([self.period - self.first])
 
-    def derivative(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
         return np.ones_like(s)
 
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         return s[:, 0] - self.period
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         return np.zeros_like(s)
+
+
+@dataclass(frozen=True)
+class RelativeRule(TriggerRule):
+    """Relative-threshold baseline: transmit when ``|e| >= rho |ytilde| + eps``.
+
+    The threshold scales with the size of the measurement, a common rule in the
+    event-triggered literature (not in the paper). ``eps > 0`` keeps a floor so that the
+    rule does not fire continuously near ``y = 0``. It has no internal state and reads
+    the current measurement ``y`` (required).
+
+    Parameters
+    ----------
+    rho : float
+        Relative threshold, ``> 0`` (e.g. ``0.05`` for 5 %).
+    eps : float
+        Absolute floor, ``> 0``.
+
+    >>> RelativeRule(rho=0.1, eps=0.01).trigger(np.zeros(1), np.array([[0.5]]), np.empty((1, 0)),
+    ...                                          y=np.array([[3.0]])).round(12).tolist()
+    [0.19]
+
+    """
+
+    rho: float
+    eps: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rho", v.real("rho", self.rho, lower=0.0, lower_open=True))
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+
+    @property
+    def n_state(self) -> int:
+        return 0
+
+    def initial_state(self) -> np.ndarray:
+        return np.empty(0)
+
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
+        return np.empty((t.shape[0], 0))
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        if y is None:
+            raise InputError("RelativeRule.trigger needs the current measurement `y`; got None")
+        return _norm(e) - self.rho * _norm(y) - self.eps
+
+    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return s
