@@ -41,3 +41,12 @@ def problem(rule, **kw) -> EstimationProblem:
 def l1_gain(G: np.ndarray) -> float:
     """``int_0^inf |exp(A_CL s) G| ds`` (spectral norm), numerically."""
     return quad(lambda s: np.linalg.norm(expm(A_CL * s) @ G, 2), 0.0, 40.0, limit=200)[0]
+
+
+def factory(sigma: float = 2.0, eps: float = 0.01, noise: bool = False) -> EstimationProblem:
+    """The oscillator with a dynamic rule, as a spec's ``system.factory``."""
+    from etobs import DynamicRule, Linear, Quadratic
+
+    rule = DynamicRule(gamma=Quadratic(4.0), alpha=Linear(1.0), sigma=sigma, c=0.2, b=1.0, eps=eps, eta0=0.1)
+    m = Sinusoid(amplitude=[0.001], omega=20.0) if noise else None
+    return problem(rule, m=m)

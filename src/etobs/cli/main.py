@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from etobs import __version__
-from etobs.cli import check, demo, sweep
+from etobs.cli import check, compare, demo, sweep
 from etobs.errors import EtobsError
 
 
@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_parser(sub)
     sweep.add_parsers(sub)
     check.add_parser(sub)
+    compare.add_parser(sub)
     return parser
 
 

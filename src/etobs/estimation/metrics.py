@@ -24,37 +24,49 @@ def _window(window: Any, result: EstimationResult) -> tuple[float, float]:
     return lo, hi
 
 
-def transmission_counts(result: EstimationResult, window: Any = None) -> np.ndarray:
+_NODES = ("outputs", "inputs", "all")
+
+
+def _node_range(result: EstimationResult, nodes: str) -> tuple[int, int]:
+    """First node index and count of the node set ``nodes``."""
+    if nodes not in _NODES:
+        raise InputError(f"`nodes` must be one of {_NODES}; got {nodes!r}")
+    n, c = result.n_nodes, result.problem.n_channels
+    return {"outputs": (0, n), "inputs": (n, c - n), "all": (0, c)}[nodes]
+
+
+def transmission_counts(
+    result: EstimationResult, window: Any = None, *, nodes: str = "outputs"
+) -> np.ndarray:
     """Transmissions of each node in ``window`` (closed; default the whole horizon).
+
+    Parameters
+    ----------
+    result : EstimationResult
+    window : (float, float), optional
+    nodes : {"outputs", "inputs", "all"}
+        The output nodes, the input nodes (section 6.3), or both (outputs first).
 
     Returns
     -------
-    ndarray of int, shape (B, N)
+    ndarray of int, shape (B, number of nodes)
 
     """
     lo, hi = _window(window, result)
+    first, count = _node_range(result, nodes)
     log = result.transmissions
-    keep = (log.t >= lo) & (log.t <= hi) & (log.rule < result.n_nodes)
-    out = np.zeros((result.n_runs, result.n_nodes), dtype=np.int64)
-    np.add.at(out, (log.run[keep], log.rule[keep]), 1)
+    keep = (log.t >= lo) & (log.t <= hi) & (log.rule >= first) & (log.rule < first + count)
+    out = np.zeros((result.n_runs, count), dtype=np.int64)
+    np.add.at(out, (log.run[keep], log.rule[keep] - first), 1)
     return out
 
 
 def input_transmission_counts(result: EstimationResult, window: Any = None) -> np.ndarray:
-    """Transmissions of each input node (section 6.3) in ``window``, counted apart from the outputs'.
+    """Transmissions of each input node (section 6.3), counted apart from the outputs'.
 
-    Returns
-    -------
-    ndarray of int, shape (B, number of input nodes)
-
+    Same as ``transmission_counts(result, window, nodes="inputs")``.
     """
-    lo, hi = _window(window, result)
-    log = result.transmissions
-    n = result.n_nodes
-    keep = (log.t >= lo) & (log.t <= hi) & (log.rule >= n)
-    out = np.zeros((result.n_runs, len(result.problem.input_nodes)), dtype=np.int64)
-    np.add.at(out, (log.run[keep], log.rule[keep] - n), 1)
-    return out
+    return transmission_counts(result, window, nodes="inputs")
 
 
 def inter_event_times(result: EstimationResult, run: int, node: int) -> np.ndarray:
@@ -62,20 +74,22 @@ def inter_event_times(result: EstimationResult, run: int, node: int) -> np.ndarr
     return np.diff(result.transmission_times(run, node))
 
 
-def min_inter_event_time(result: EstimationResult) -> np.ndarray:
+def min_inter_event_time(result: EstimationResult, *, nodes: str = "outputs") -> np.ndarray:
     """Smallest time between two transmissions of the same node.
 
     Returns
     -------
-    ndarray, shape (B, N)
-        NaN where a node transmitted fewer than twice.
+    ndarray, shape (B, number of nodes)
+        NaN where a node transmitted fewer than twice. ``nodes`` as in
+        :func:`transmission_counts`.
 
     """
-    out = np.full((result.n_runs, result.n_nodes), np.nan)
+    first, count = _node_range(result, nodes)
+    out = np.full((result.n_runs, count), np.nan)
     log = result.transmissions
     for b in range(result.n_runs):
-        for i in range(result.n_nodes):
-            d = np.diff(log.t[(log.run == b) & (log.rule == i)])
+        for i in range(count):
+            d = np.diff(log.t[(log.run == b) & (log.rule == first + i)])
             if d.size:
                 out[b, i] = d.min()
     return out

@@ -293,39 +293,11 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         raise SpecError("give either `rows` or `grid`, not both")
     rows = _rows(top)
     scenarios = _scenarios(top.get("scenarios", [{"name": "default"}]))
-    ini = _keys("initial_states", top["initial_states"], {"low", "high", "runs", "seed"}, set())
-    for k in ("low", "high"):
-        if not isinstance(ini[k], list) or not ini[k]:
-            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {ini[k]!r}")
-    low = tuple(float(_number(f"initial_states.low[{i}]", v)) for i, v in enumerate(ini["low"]))
-    high = tuple(float(_number(f"initial_states.high[{i}]", v)) for i, v in enumerate(ini["high"]))
-    if len(low) != len(high):
-        raise SpecError(
-            f"`initial_states.low` has {len(low)} entries but `initial_states.high` has {len(high)}"
-        )
-    if any(h < lo for lo, h in zip(low, high, strict=True)):
-        raise SpecError("`initial_states.high` must be >= `initial_states.low` entrywise")
-    states = InitialStates(
-        low,
-        high,
-        int(_number("initial_states.runs", ini["runs"], lower=1, integer=True)),
-        int(_number("initial_states.seed", ini["seed"], lower=0, integer=True)),
-    )
+    states = parse_initial_states(top["initial_states"])
     hor = _keys("horizon", top["horizon"], {"t_end"}, set())
     t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
-    met = _keys(
-        "metrics", top.get("metrics", {}), set(), {"transmissions_window", "error_window", "error_grid_step"}
-    )
-    metrics = Metrics(
-        _window("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end]), t_end),
-        _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end),
-        float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
-    )
-    solver = _keys("solver", top.get("solver", {}), set(), _SOLVER_KEYS)
-    try:
-        SolverOptions(**solver)
-    except InputError as exc:
-        raise SpecError(f"`solver`: {exc}") from exc
+    metrics = parse_metrics(top.get("metrics", {}), t_end)
+    solver = parse_solver(top.get("solver", {}))
     execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size", "backend"})
     if "chunk_size" in execution:
         _number("execution.chunk_size", execution["chunk_size"], lower=1, integer=True)
@@ -344,6 +316,48 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         solver=dict(solver),
         raw=raw,
     )
+
+
+def parse_initial_states(table: Any) -> InitialStates:
+    """Validate ``[initial_states]``: ``low``, ``high``, ``runs``, ``seed``."""
+    ini = _keys("initial_states", table, {"low", "high", "runs", "seed"}, set())
+    for k in ("low", "high"):
+        if not isinstance(ini[k], list) or not ini[k]:
+            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {ini[k]!r}")
+    low = tuple(float(_number(f"initial_states.low[{i}]", v)) for i, v in enumerate(ini["low"]))
+    high = tuple(float(_number(f"initial_states.high[{i}]", v)) for i, v in enumerate(ini["high"]))
+    if len(low) != len(high):
+        raise SpecError(
+            f"`initial_states.low` has {len(low)} entries but `initial_states.high` has {len(high)}"
+        )
+    if any(h < lo for lo, h in zip(low, high, strict=True)):
+        raise SpecError("`initial_states.high` must be >= `initial_states.low` entrywise")
+    return InitialStates(
+        low,
+        high,
+        int(_number("initial_states.runs", ini["runs"], lower=1, integer=True)),
+        int(_number("initial_states.seed", ini["seed"], lower=0, integer=True)),
+    )
+
+
+def parse_metrics(table: Any, t_end: float) -> Metrics:
+    """Validate ``[metrics]`` (every key optional) for a horizon ``t_end``."""
+    met = _keys("metrics", table, set(), {"transmissions_window", "error_window", "error_grid_step"})
+    return Metrics(
+        _window("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end]), t_end),
+        _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end),
+        float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
+    )
+
+
+def parse_solver(table: Any) -> dict[str, Any]:
+    """Validate ``[solver]``: any :class:`SolverOptions` field."""
+    solver = _keys("solver", table, set(), _SOLVER_KEYS)
+    try:
+        SolverOptions(**solver)
+    except InputError as exc:
+        raise SpecError(f"`solver`: {exc}") from exc
+    return dict(solver)
 
 
 def _rows(top: dict[str, Any]) -> tuple[dict[str, Any], ...]:

@@ -1,5 +1,6 @@
 """Figures from simulation results (needs the ``plot`` extra: matplotlib)."""
 
+from etobs.plot.compare import plot_tradeoff
 from etobs.plot.figures import plot_error, plot_inter_event_times, plot_states
 
-__all__ = ["plot_error", "plot_inter_event_times", "plot_states"]
+__all__ = ["plot_error", "plot_inter_event_times", "plot_states", "plot_tradeoff"]

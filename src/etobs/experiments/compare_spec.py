@@ -1,0 +1,311 @@
+"""Specification of a rule comparison (``etobs compare SPEC``): data, validated, frozen.
+
+A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
+
+    name = "robot_arm_rules"
+    [system]
+    factory = "robot_arm"          # the base problem: its nodes, plant, observer
+    params = { noise = true }      # keyword arguments of the factory
+    [initial_states]               # the same initial states for every entry
+    low = [0, 0, 0, 0]
+    high = [20, 10, 20, 10]
+    runs = 10
+    seed = 2023
+    [horizon]
+    t_end = 30.0
+    [metrics]                      # as in a sweep spec
+    error_window = [20.0, 30.0]
+    [solver]                       # any SolverOptions field
+    rtol = 1e-10
+    [execution]
+    backend = "auto"               # "numba" where the entry allows it, else "fast"
+
+    [[rules]]                      # one entry per rule; per-node values are a number
+    name = "dynamic (paper)"       # (every node) or a list (one per node)
+    kind = "base"                  # the factory's own rules
+    [[rules]]
+    name = "static"
+    kind = "static"                # gamma from the base rule, eps given (or the base's)
+    eps = 10.0
+    [[rules]]
+    name = "observer copy"
+    kind = "base"
+    observer_copy = true           # Remark 3: nodes hold ytilde - yhat
+
+    [[networks]]                   # every rule runs on every network (default: ideal)
+    name = "ideal"
+    [[networks]]
+    name = "20% loss, 10 ms"
+    delay = 0.01                   # or { uniform = [lo, hi] } or { exponential = [scale, min] }
+    loss = 0.2                     # or { gilbert_elliott = [p_gb, p_bg, loss_good, loss_bad] }
+    capacity = 16
+    seed = 1
+
+Rule kinds and their keys: ``base``; ``dynamic`` (any of ``sigma``, ``c``, ``b``,
+``eps``, ``eta0`` replacing the base :class:`~etobs.model.DynamicRule`'s);
+``static`` (``eps``); ``periodic`` (``period``); ``relative`` (``rho``, ``eps``);
+``send_on_delta`` (``delta``). Every kind takes ``observer_copy``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+from etobs.errors import InputError
+from etobs.estimation.problem import EstimationProblem
+from etobs.experiments.spec import (
+    InitialStates,
+    Metrics,
+    SpecError,
+    _keys,
+    _number,
+    parse_initial_states,
+    parse_metrics,
+    parse_solver,
+)
+from etobs.hybrid.options import SolverOptions
+from etobs.model.network import (
+    ConstantDelay,
+    Delay,
+    ExponentialDelay,
+    GilbertElliottLoss,
+    Link,
+    Loss,
+    Network,
+    UniformDelay,
+)
+from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
+
+#: Keys of each rule kind (besides ``name``, ``kind`` and ``observer_copy``).
+RULE_KINDS: dict[str, tuple[str, ...]] = {
+    "base": (),
+    "dynamic": ("sigma", "c", "b", "eps", "eta0"),
+    "static": ("eps",),
+    "periodic": ("period",),
+    "relative": ("rho", "eps"),
+    "send_on_delta": ("delta",),
+}
+BACKENDS = ("auto", "fast", "numba")
+
+
+@dataclass(frozen=True)
+class RuleEntry:
+    """One rule of the comparison, applied to every output node."""
+
+    name: str
+    kind: str
+    params: dict[str, Any]
+    observer_copy: bool = False
+
+    def value(self, key: str, node: int, n_nodes: int) -> float:
+        """The parameter ``key`` of ``node``: a number for all nodes, or one per node."""
+        raw = self.params[key]
+        where = f"rules[{self.name!r}].{key}"
+        if isinstance(raw, list):
+            if len(raw) != n_nodes:
+                raise SpecError(f"`{where}` has {len(raw)} values but the problem has {n_nodes} nodes")
+            raw = raw[node]
+            where = f"{where}[{node}]"
+        return float(_number(where, raw))
+
+    def make(self, node: int, n_nodes: int, base: TriggerRule) -> TriggerRule:
+        """The rule of this entry for ``node``, whose base rule is ``base``."""
+        p = {k: self.value(k, node, n_nodes) for k in self.params}
+        try:
+            if self.kind == "base":
+                return base
+            if self.kind == "dynamic":
+                if not isinstance(base, DynamicRule):
+                    raise SpecError(
+                        f"`rules[{self.name!r}]`: kind 'dynamic' changes a DynamicRule, but node {node}'s "
+                        f"base rule is a {type(base).__name__}"
+                    )
+                return replace(base, **p)
+            if self.kind == "static":
+                gamma = getattr(base, "gamma", None)
+                if gamma is None:
+                    raise SpecError(
+                        f"`rules[{self.name!r}]`: kind 'static' takes gamma from the base rule, but node "
+                        f"{node}'s {type(base).__name__} has none"
+                    )
+                eps = p.get("eps", getattr(base, "eps", None))
+                if eps is None:
+                    raise SpecError(f"`rules[{self.name!r}].eps` is missing (the base rule has none)")
+                return StaticRule(gamma=gamma, eps=eps)
+            if self.kind == "periodic":
+                return PeriodicRule(p["period"])
+            if self.kind == "relative":
+                return RelativeRule(rho=p["rho"], eps=p["eps"])
+            return send_on_delta(p["delta"])
+        except SpecError:
+            raise
+        except InputError as exc:
+            raise SpecError(f"`rules[{self.name!r}]`, node {node}: {exc}") from exc
+        except (KeyError, TypeError) as exc:
+            raise SpecError(f"`rules[{self.name!r}]`: missing or wrong parameter ({exc})") from exc
+
+    def apply(self, base: EstimationProblem, network: Network | None) -> EstimationProblem:
+        """The base problem with this rule on every output node, and ``network``."""
+        n = base.n_nodes
+        nodes = tuple(replace(nd, rule=self.make(i, n, nd.rule)) for i, nd in enumerate(base.nodes))
+        hold = "innovation" if self.observer_copy else base.hold
+        return replace(base, nodes=nodes, hold=hold, network=network)
+
+
+@dataclass(frozen=True)
+class NetworkEntry:
+    """One network setting of the comparison; ``network`` is ``None`` for the ideal one."""
+
+    name: str
+    network: Network | None
+
+
+@dataclass(frozen=True)
+class CompareSpec:
+    """A validated comparison; build it with :func:`parse_compare_spec`."""
+
+    name: str
+    factory: str
+    params: dict[str, Any]
+    initial_states: InitialStates
+    t_end: float
+    metrics: Metrics
+    solver: dict[str, Any]
+    backend: str
+    rules: tuple[RuleEntry, ...]
+    networks: tuple[NetworkEntry, ...]
+
+    @property
+    def options(self) -> SolverOptions:
+        """The solver options of every entry."""
+        return SolverOptions(**self.solver)
+
+    def with_runs(self, runs: int | None) -> CompareSpec:
+        """The same spec with another number of runs (``None``: unchanged)."""
+        if runs is None:
+            return self
+        ini = replace(self.initial_states, runs=int(_number("runs", runs, lower=1, integer=True)))
+        return replace(self, initial_states=ini)
+
+
+def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
+    """Validate a comparison spec given as a dictionary (the parsed TOML)."""
+    top = _keys(
+        "spec",
+        raw,
+        {"system", "initial_states", "horizon", "rules"},
+        {"name", "metrics", "solver", "execution", "networks"},
+    )
+    name = top.get("name", "compare")
+    if not isinstance(name, str) or not name:
+        raise SpecError(f"`name` must be a non-empty string; got {name!r}")
+    system = _keys("system", top["system"], {"factory"}, {"params"})
+    if not isinstance(system["factory"], str):
+        raise SpecError(f"`system.factory` must be a string; got {system['factory']!r}")
+    params = system.get("params", {})
+    if not isinstance(params, dict):
+        raise SpecError(f"`system.params` must be a table of keyword arguments; got {type(params).__name__}")
+    hor = _keys("horizon", top["horizon"], {"t_end"}, set())
+    t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
+    execution = _keys("execution", top.get("execution", {}), set(), {"backend"})
+    backend = execution.get("backend", "auto")
+    if backend not in BACKENDS:
+        raise SpecError(f"`execution.backend` must be one of {BACKENDS}; got {backend!r}")
+    rules = _list("rules", top["rules"], _rule)
+    networks = _list("networks", top.get("networks", [{"name": "ideal"}]), _network)
+    return CompareSpec(
+        name=name,
+        factory=system["factory"],
+        params=dict(params),
+        initial_states=parse_initial_states(top["initial_states"]),
+        t_end=t_end,
+        metrics=parse_metrics(top.get("metrics", {}), t_end),
+        solver=parse_solver(top.get("solver", {})),
+        backend=backend,
+        rules=rules,
+        networks=networks,
+    )
+
+
+def _list(key: str, items: Any, parse: Any) -> tuple[Any, ...]:
+    if not isinstance(items, list) or not items:
+        raise SpecError(f"`{key}` must be a non-empty array of tables ([[{key}]]); got {items!r}")
+    out = tuple(parse(f"{key}[{i}]", item) for i, item in enumerate(items))
+    names = [e.name for e in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SpecError(f"`{key}` names must be distinct; {twice[0]!r} is used twice")
+    return out
+
+
+def _entry_name(where: str, table: dict[str, Any]) -> str:
+    name = table.get("name")
+    if not isinstance(name, str) or not name:
+        raise SpecError(f"`{where}.name` must be a non-empty string; got {name!r}")
+    return name
+
+
+def _rule(where: str, table: Any) -> RuleEntry:
+    if not isinstance(table, dict):
+        raise SpecError(f"`{where}` must be a table; got {type(table).__name__}")
+    kind = table.get("kind")
+    if kind not in RULE_KINDS:
+        raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {kind!r}")
+    required = {"name", "kind"} | ({"period"} if kind == "periodic" else set())
+    required |= {"rho", "eps"} if kind == "relative" else set()
+    required |= {"delta"} if kind == "send_on_delta" else set()
+    t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy"})
+    copy = t.get("observer_copy", False)
+    if not isinstance(copy, bool):
+        raise SpecError(f"`{where}.observer_copy` must be true or false; got {copy!r}")
+    params = {k: v for k, v in t.items() if k not in ("name", "kind", "observer_copy")}
+    for k, val in params.items():
+        for i, x in enumerate(val if isinstance(val, list) else [val]):
+            _number(f"{where}.{k}" + (f"[{i}]" if isinstance(val, list) else ""), x)
+    return RuleEntry(name=_entry_name(where, t), kind=kind, params=params, observer_copy=copy)
+
+
+def _network(where: str, table: Any) -> NetworkEntry:
+    t = _keys(where, table, {"name"}, {"delay", "loss", "capacity", "seed"})
+    name = _entry_name(where, t)
+    if set(t) == {"name"}:
+        return NetworkEntry(name, None)
+    try:
+        link = Link(
+            delay=_delay(f"{where}.delay", t.get("delay", 0.0)),
+            loss=_loss(f"{where}.loss", t.get("loss")),
+            capacity=int(_number(f"{where}.capacity", t.get("capacity", 16), lower=1, integer=True)),
+        )
+    except SpecError:
+        raise
+    except InputError as exc:
+        raise SpecError(f"`{where}`: {exc}") from exc
+    seed = int(_number(f"{where}.seed", t.get("seed", 0), lower=0, integer=True))
+    return NetworkEntry(name, Network(link, seed=seed))
+
+
+def _delay(where: str, value: Any) -> Delay:
+    if not isinstance(value, dict):
+        return ConstantDelay(float(_number(where, value, lower=0.0)))
+    t = _keys(where, value, set(), {"uniform", "exponential"})
+    if len(t) != 1:
+        raise SpecError(f"`{where}` must give exactly one of uniform = [lo, hi], exponential = [scale, min]")
+    ((kind, args),) = t.items()
+    nums = _numbers(f"{where}.{kind}", args, 2)
+    return UniformDelay(*nums) if kind == "uniform" else ExponentialDelay(*nums)
+
+
+def _loss(where: str, value: Any) -> float | Loss | None:
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        return float(_number(where, value, lower=0.0))
+    t = _keys(where, value, {"gilbert_elliott"}, set())
+    return GilbertElliottLoss(*_numbers(f"{where}.gilbert_elliott", t["gilbert_elliott"], 4))
+
+
+def _numbers(where: str, value: Any, n: int) -> list[float]:
+    if not isinstance(value, list) or len(value) != n:
+        raise SpecError(f"`{where}` must be a list of {n} numbers; got {value!r}")
+    return [float(_number(f"{where}[{i}]", x)) for i, x in enumerate(value)]

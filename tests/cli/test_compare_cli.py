@@ -1,0 +1,188 @@
+"""``etobs compare``: the spec, the table, persistence and resume, the plot."""
+
+import json
+
+import numpy as np
+import pytest
+
+from etobs.cli.main import main
+from etobs.experiments.compare import compare
+from etobs.experiments.compare_spec import parse_compare_spec
+from etobs.experiments.spec import SpecError
+
+SPEC = {
+    "name": "oscillator",
+    "system": {"factory": "tests.estimation.linear:factory", "params": {"eps": 0.01}},
+    "initial_states": {"low": [-1.0, -1.0], "high": [1.0, 1.0], "runs": 3, "seed": 4},
+    "horizon": {"t_end": 8.0},
+    "metrics": {"error_window": [6.0, 8.0], "error_grid_step": 0.01},
+    "execution": {"backend": "fast"},
+    "rules": [
+        {"name": "dynamic", "kind": "base"},
+        {"name": "static", "kind": "static", "eps": 0.01},
+        {"name": "periodic", "kind": "periodic", "period": 0.05},
+        {"name": "relative", "kind": "relative", "rho": 0.05, "eps": 0.01},
+        {"name": "send-on-delta", "kind": "send_on_delta", "delta": 0.05},
+        {"name": "copy", "kind": "base", "observer_copy": True},
+        {"name": "dynamic sigma 0", "kind": "dynamic", "sigma": 0.0},
+    ],
+    "networks": [{"name": "ideal"}, {"name": "lossy", "loss": 0.2, "delay": 0.01, "seed": 3}],
+}
+
+TOML = """
+name = "oscillator"
+[system]
+factory = "tests.estimation.linear:factory"
+[initial_states]
+low = [-1.0, -1.0]
+high = [1.0, 1.0]
+runs = 2
+seed = 4
+[horizon]
+t_end = 4.0
+[metrics]
+error_window = [3.0, 4.0]
+error_grid_step = 0.01
+[execution]
+backend = "fast"
+[[rules]]
+name = "dynamic"
+kind = "base"
+[[rules]]
+name = "periodic"
+kind = "periodic"
+period = 0.1
+[[networks]]
+name = "ideal"
+[[networks]]
+name = "lossy"
+loss = 0.5
+delay = 0.02
+"""
+
+
+@pytest.fixture(scope="module")
+def comparison():
+    return compare(parse_compare_spec(SPEC))
+
+
+def test_every_rule_runs_on_every_network_from_the_same_states(comparison):
+    rows = comparison.table()
+    assert [(r["rule"], r["network"]) for r in rows[:2]] == [("dynamic", "ideal"), ("static", "ideal")]
+    assert len(rows) == 13 and all(r["completed"] == "3/3" for r in rows)
+    assert [s[:2] for s in comparison.skipped] == [
+        ("copy", "lossy")
+    ]  # Remark 3's copy needs the ideal network
+    by = {(r["rule"], r["network"]): r for r in rows}
+    # periodic: 0.05 s over 8 s, whatever the network (it counts packets sent)
+    # (the 160th falls on t_end, where the clock's rounding decides)
+    assert by[("periodic", "ideal")]["transmissions y"] in (159.0, 160.0)
+    assert by[("periodic", "lossy")]["transmissions y"] == by[("periodic", "ideal")]["transmissions y"]
+    # static with the same gamma and eps as sigma = 0 dynamic: the same transmissions
+    e = {(x.rule, x.network): x for x in comparison.entries}
+    np.testing.assert_array_equal(
+        e[("static", "ideal")].transmissions, e[("dynamic sigma 0", "ideal")].transmissions
+    )
+    # the dynamic rule sends less than the static one (sigma alpha(eta) raises the bar)
+    assert by[("dynamic", "ideal")]["transmissions total"] < by[("static", "ideal")]["transmissions total"]
+    # the ideal network loses nothing; the lossy one about 20 %
+    assert np.isnan(by[("dynamic", "ideal")]["not applied"])
+    assert 0.05 < by[("periodic", "lossy")]["not applied"] < 0.35
+    for r in rows:  # every min inter-event time is positive
+        assert not r["min inter-event y"] <= 0
+
+
+def test_markdown_table_has_a_row_per_entry_and_states_the_windows(comparison):
+    md = comparison.markdown()
+    lines = md.splitlines()
+    assert lines[0].startswith("| rule | network | completed | transmissions y |")
+    assert sum(1 for ln in lines if ln.startswith("| ")) == 14
+    assert "Not run: copy / lossy: the observer copy of Remark 3 is simulated as a perfect copy" in md
+    assert "error = max |x - xhat| on [6, 8] s on a 0.01 s grid" in md
+
+
+def test_trade_off_plot(comparison):
+    pytest.importorskip("matplotlib")
+    from etobs.plot import plot_tradeoff
+
+    _, ax = plot_tradeoff(comparison)
+    assert len(ax.get_legend().get_texts()) == 7 + 2
+    assert ax.get_yscale() == "log"
+
+
+def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
+    spec = tmp_path / "cmp.toml"
+    spec.write_text(TOML)
+    out = tmp_path / "out"
+    assert main(["compare", str(spec), "--out", str(out)]) == 0
+    printed = capsys.readouterr()
+    assert "| dynamic | ideal | 2/2 |" in printed.out
+    assert "[4/4] periodic / lossy" in printed.err
+    for name in ("comparison.md", "comparison.json", "tradeoff.png"):
+        assert (out / name).is_file()
+    data = json.loads((out / "comparison.json").read_text())
+    assert [e["rule"] for e in data["entries"]] == ["dynamic", "periodic", "dynamic", "periodic"]
+    assert len(list((out / "entries").glob("*.json"))) == 4
+    # a rerun reuses the finished entries and gives the same table
+    before = (out / "comparison.md").read_text()
+    assert main(["compare", str(spec), "--out", str(out), "--no-plot"]) == 0
+    assert "reusing 4 of 4 entries" in capsys.readouterr().err
+    assert (out / "comparison.md").read_text() == before
+    # another number of runs is another set of entries
+    assert main(["compare", str(spec), "--out", str(out), "--runs", "1", "--no-plot"]) == 0
+    assert "reusing" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"rules": []}, r"`rules` must be a non-empty array of tables"),
+        ({"rules": [{"name": "x", "kind": "magic"}]}, r"`rules\[0\].kind` must be one of base, dynamic"),
+        ({"rules": [{"name": "x", "kind": "periodic"}]}, r"missing key `rules\[0\].period`"),
+        ({"rules": [{"name": "x", "kind": "static", "rho": 1}]}, r"unknown key `rules\[0\].rho`"),
+        (
+            {"rules": [{"name": "x", "kind": "base"}] * 2},
+            r"`rules` names must be distinct; 'x' is used twice",
+        ),
+        (
+            {"rules": [{"name": "x", "kind": "base", "observer_copy": 1}]},
+            r"observer_copy` must be true or false",
+        ),
+        ({"rules": [{"name": "x", "kind": "static", "eps": "big"}]}, r"`rules\[0\].eps` must be a number"),
+        ({"networks": [{"name": "n", "loss": 2.0}]}, r"`networks\[0\]`: `p` must be <= 1; got 2"),
+        (
+            {"networks": [{"name": "n", "delay": {"gamma": [1, 2]}}]},
+            r"unknown key `networks\[0\].delay.gamma`",
+        ),
+        ({"networks": [{"name": "n", "delay": {"uniform": [1]}}]}, r"uniform` must be a list of 2 numbers"),
+        ({"execution": {"backend": "gpu"}}, r"`execution.backend` must be one of"),
+        ({"horizon": {"t_end": -1}}, r"`horizon.t_end` must be > 0"),
+    ],
+)
+def test_spec_errors_name_the_key(change, message):
+    with pytest.raises(SpecError, match=message):
+        parse_compare_spec({**SPEC, **change})
+
+
+def test_rule_errors_at_run_time_name_the_entry_and_node():
+    spec = parse_compare_spec({**SPEC, "rules": [{"name": "bad", "kind": "periodic", "period": [0.1, 0.2]}]})
+    with pytest.raises(SpecError, match=r"`rules\['bad'\].period` has 2 values but the problem has 1 nodes"):
+        compare(spec)
+    spec = parse_compare_spec({**SPEC, "rules": [{"name": "neg", "kind": "relative", "rho": -1, "eps": 1}]})
+    with pytest.raises(SpecError, match=r"`rules\['neg'\]`, node 0: `rho` must be > 0; got -1"):
+        compare(spec)
+
+
+def test_cli_bad_spec_exits_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["compare", str(tmp_path / "missing.toml")])
+    assert exc.value.code == 2
+    assert "SPEC must be a TOML file or one of robot_arm" in capsys.readouterr().err
+
+
+def test_packaged_robot_arm_spec_parses():
+    from etobs.cli.compare import load
+
+    spec = load("robot_arm")
+    assert [r.kind for r in spec.rules][:2] == ["base", "static"]
+    assert spec.networks[1].network.links[0].loss.p == 0.2
