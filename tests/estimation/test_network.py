@@ -162,3 +162,22 @@ def test_network_errors_name_the_argument():
         linear.problem(PeriodicRule(0.1), network=Link())
     with pytest.raises(InputError, match=r"this problem has no network"):
         simulate(linear.problem(PeriodicRule(0.1)), X0[:1], 0.1).network_stats()
+
+
+def test_the_network_does_not_change_when_nodes_send():
+    """A node's rule acts on what it sent, never on what arrived, and the plant does not
+    depend on the observer: the transmissions are those of the ideal network (up to the
+    solver's tolerance, as delivery events split its steps differently)."""
+    rule = linear.factory().nodes[0].rule
+    ideal = simulate(linear.problem(rule), X0, 6.0, z0=np.zeros(2))
+    lossy = simulate(
+        linear.problem(rule, network=Network(Link(delay=UniformDelay(0.0, 0.05), loss=0.3), seed=9)),
+        X0,
+        6.0,
+        z0=np.zeros(2),
+    )
+    a, b = ideal.transmissions, lossy.transmissions
+    assert len(a) > 20
+    np.testing.assert_array_equal(a.run, b.run)
+    np.testing.assert_allclose(a.t, b.t, atol=1e-6)
+    assert lossy.network_stats()["lost"].sum() > 0

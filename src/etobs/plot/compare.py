@@ -34,7 +34,7 @@ def plot_tradeoff(comparison: Comparison, *, log: bool = True) -> tuple[Any, Any
         ax.plot([x, x], [y, top], color=color, lw=0.8, alpha=0.6)
         ax.plot(x, y, marker=marker, color=color, ls="none", ms=7)
     for k, name in enumerate(rules):  # legend entries: rules by colour, networks by marker
-        ax.plot([], [], color=f"C{k % 10}", marker="s", ls="none", label=name)
+        ax.plot([], [], color=f"C{k % 10}", lw=4, label=name)
     for k, name in enumerate(networks):
         ax.plot([], [], color="0.3", marker=_MARKERS[k % len(_MARKERS)], ls="none", label=f"network: {name}")
     if log:
