@@ -28,3 +28,14 @@ def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=Fal
     obs = Observer(f_o=lambda t, z, u, ybar, yhat: -k * z + np.sin(t)[:, None] + 2.0 * (ybar - yhat), n_z=1)
     rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.1, b=1.0, eps=eps, eta0=1.0)
     return EstimationProblem(plant, obs, [Node((0,), rule)])
+
+
+def scalar_network(k=1.0, loss=0.0, delay=0.0, relative=False):
+    """The scalar system behind a lossy, delayed network, optionally with the relative rule."""
+    from etobs import Link, Network, RelativeRule
+
+    pb = scalar(k=k)
+    rule = RelativeRule(rho=0.1, eps=0.01) if relative else pb.nodes[0].rule
+    return EstimationProblem(
+        pb.plant, pb.observer, [Node((0,), rule)], network=Network(Link(delay=delay, loss=loss), seed=5)
+    )

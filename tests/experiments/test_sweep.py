@@ -7,6 +7,8 @@ import time
 import numpy as np
 import pytest
 
+from etobs import simulate
+from etobs.errors import InputError
 from etobs.experiments import parse_spec, run_sweep
 from etobs.experiments.spec import SpecError
 from etobs.experiments.systems import build_problem, check_factory, resolve_factory
@@ -97,7 +99,7 @@ def test_factory_errors_name_the_problem(tmp_path):
 def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
     marker = tmp_path / "died"
     spec = parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"die_marker": str(marker)}}))
-    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=2, progress=False)
+    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=2, progress=False).complete
     assert marker.exists()  # one worker really died
     assert res.complete
     keys = [(r["row"], r["scenario"], r["run"]) for r in res.runs]
@@ -194,7 +196,7 @@ def test_executor_errors(tiny, tmp_path):
 
 def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_path):
     failing = parse_spec(raw_spec(rows=[{"k": 1.0, "fail": True}]))
-    first = run_sweep(failing, tmp_path, executor="serial", chunk=2, progress=False)
+    first = run_sweep(failing, tmp_path, executor="serial", chunk=2, progress=False).complete
     assert len(first.failures) == 6
     # Same key space is not shared (fail=True is a parameter); simulate a fixed factory by
     # storing the runs under the failing key through a successful spec with that key.
@@ -336,3 +338,24 @@ def test_numba_backend_sweep_gives_the_fast_backend_counts(tmp_path):
     assert [r["transmissions"] for r in ours.runs] == [r["transmissions"] for r in fast.runs]
     errors = np.array([[a["error"], b["error"]] for a, b in zip(ours.runs, fast.runs, strict=True)])
     np.testing.assert_allclose(errors[:, 0], errors[:, 1], rtol=1e-6)
+
+
+def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_path):
+    """A factory may return any problem: here a lossy, delayed network and the relative
+    rule. Packets are drawn per global run index, so chunking does not change them."""
+    spec = parse_spec(
+        raw_spec(
+            system={
+                "factory": FACTORY.replace(":scalar", ":scalar_network"),
+                "fixed": {"loss": 0.3, "delay": 0.05},
+            },
+            rows=[{"relative": False}, {"relative": True}],
+            scenarios=[{"name": "default"}],
+        )
+    )
+    one = run_sweep(spec, tmp_path / "one", executor="serial", chunk=5, progress=False)
+    assert run_sweep(spec, tmp_path / "many", executor="serial", chunk=2, progress=False).complete
+    assert one.complete and len(one.runs) == 10
+    assert read_runs(tmp_path / "one") == read_runs(tmp_path / "many")
+    with pytest.raises(InputError, match=r"`run_ids` must be 2 non-negative integers"):
+        simulate(build_problem(spec, 0, 0), [[0.5], [0.2]], 1.0, run_ids=[0])

@@ -155,13 +155,16 @@ class EstimationProblem:
         m: Signal = self.m
         return self.plant.h(x) + m(t)
 
-    def initial_state(self, x0: np.ndarray, z0: np.ndarray, e0: np.ndarray, t0: float) -> np.ndarray:
+    def initial_state(
+        self, x0: np.ndarray, z0: np.ndarray, e0: np.ndarray, t0: float, run_ids: np.ndarray | None = None
+    ) -> np.ndarray:
         """Hybrid state at ``t0``: ``ybar = ytilde(t0) + e0`` and each rule's own start.
 
         The held inputs start exact, ``ubar(t0) = u(t0)``; the observer-copy variant
         holds ``ytilde(t0) - yhat(t0) + e0``. With a network the nodes' sent values
         equal the held ones, no packet is in flight, and run ``b`` of the batch draws its
-        packets' fates from the stream ``(seed, b, node)``.
+        packets' fates from the stream ``(seed, run_ids[b], node)`` (default
+        ``run_ids = 0 .. B-1``).
         """
         from etobs.estimation.assembly import EMPTY, slot_columns
 
@@ -184,7 +187,7 @@ class EstimationProblem:
             if ch.net is not None:
                 q[:, slot_columns(ch)[0]] = EMPTY
         if lay.run is not None:
-            q[:, lay.run] = np.arange(b)
+            q[:, lay.run] = np.arange(b) if run_ids is None else run_ids
         return q
 
     def hybrid_system(self) -> HybridSystem:

@@ -28,6 +28,7 @@ def simulate(
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
     backend: str = "fast",
+    run_ids: Any = None,
 ) -> EstimationResult:
     """Simulate the event-triggered observer (eq. (16)--(22)) from one or many initial states.
 
@@ -52,6 +53,10 @@ def simulate(
         The batched numpy solver; the ``solve_ivp`` reference used for cross-checks; or
         the compiled solver (optional numba; needs the plant's and observer's ``jit``
         functions, see :mod:`etobs.estimation.compiled`), the fastest for many runs.
+    run_ids : array_like of int, shape (B,), optional
+        With a network: the index of each run in its random streams (default
+        ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
+        not depend on how the sweep was chunked.
 
     Returns
     -------
@@ -78,7 +83,12 @@ def simulate(
     B = X0.shape[0]
     Z0 = _broadcast("z0", np.zeros(o.n_z) if z0 is None else z0, o.n_z, B)
     E0 = _broadcast("e0", np.zeros(p.n_y) if e0 is None else e0, p.n_y, B)
-    q0 = problem.initial_state(X0, Z0, E0, t0)
+    ids = None
+    if run_ids is not None:
+        ids = np.asarray(run_ids)
+        if ids.shape != (B,) or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
+            raise InputError(f"`run_ids` must be {B} non-negative integers (one per run); got {run_ids!r}")
+    q0 = problem.initial_state(X0, Z0, E0, t0, ids)
     if backend == "numba":
         from etobs.estimation.compiled import compile_problem
         from etobs.hybrid.compiled import solve_compiled

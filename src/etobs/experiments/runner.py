@@ -52,6 +52,7 @@ def run_task(raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
         options=spec.options,
         save=SaveAt(steps=False, grid=grid),
         backend=spec.backend,
+        run_ids=np.array(task.runs),
     )
     counts = transmission_counts(res, spec.metrics.transmissions_window)
     errors = max_estimation_error(res, (lo, hi)) if hi >= lo else np.full(len(task.runs), np.nan)
