@@ -32,13 +32,11 @@ from __future__ import annotations
 import argparse
 import inspect
 import sys
-import tomllib
-from importlib import resources
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from etobs.cli._args import load_toml
 from etobs.experiments.spec import SpecError, _keys, _number
 from etobs.experiments.systems import resolve_factory
 
@@ -96,17 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load(name: str) -> dict[str, Any]:
-    if name in PACKAGED:
-        text = resources.files("etobs.design").joinpath("data", PACKAGED[name]).read_text()
-    else:
-        path = Path(name)
-        if not path.is_file():
-            raise SpecError(f"SPEC must be a TOML file or one of {', '.join(PACKAGED)}; got {name!r}")
-        text = path.read_text(encoding="utf-8")
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
+    return load_toml(name, PACKAGED, "etobs.design")
 
 
 def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:

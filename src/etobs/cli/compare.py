@@ -10,14 +10,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tomllib
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from etobs.cli._args import load_toml, positive_int
 from etobs.experiments.compare import Comparison, EntryResult, compare, entry_key
 from etobs.experiments.compare_spec import CompareSpec, parse_compare_spec
-from etobs.experiments.spec import SpecError
 from etobs.experiments.store import atomic_write
 
 PACKAGED = {"robot_arm": "robot_arm_compare.toml"}
@@ -35,35 +33,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--out", type=Path, default=Path("compare-out"), help="output folder (default compare-out)"
     )
-    p.add_argument("--runs", type=_positive_int, default=None, help="override initial_states.runs")
+    p.add_argument("--runs", type=positive_int, default=None, help="override initial_states.runs")
     p.add_argument("--no-plot", action="store_true", help="skip tradeoff.png")
     p.set_defaults(func=run)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--runs must be a positive integer; got {text!r}")
-    return value
-
-
 def load(name: str) -> CompareSpec:
     """A packaged spec by name, or a TOML file."""
-    if name in PACKAGED:
-        text = resources.files("etobs.experiments").joinpath("data", PACKAGED[name]).read_text()
-    else:
-        path = Path(name)
-        if not path.is_file():
-            raise SpecError(f"SPEC must be a TOML file or one of {', '.join(PACKAGED)}; got {name!r}")
-        text = path.read_text(encoding="utf-8")
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
-    return parse_compare_spec(raw)
+    return parse_compare_spec(load_toml(name, PACKAGED, "etobs.experiments"))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,21 +7,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from etobs.cli._args import positive_int
 from etobs.errors import InputError
 from etobs.experiments import SweepResult, load_spec, run_sweep
 from etobs.experiments.executors import EXECUTORS
 from etobs.experiments.store import atomic_write
 from etobs.experiments.tables import to_csv
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer; got {text!r}")
-    return value
 
 
 def _execution_args(p: argparse.ArgumentParser) -> None:
@@ -31,10 +22,10 @@ def _execution_args(p: argparse.ArgumentParser) -> None:
         default=None,
         help="where chunks run (default: process, or dask with --scheduler)",
     )
-    p.add_argument("--workers", type=_positive_int, default=None, help="local processes (default: cores)")
+    p.add_argument("--workers", type=positive_int, default=None, help="local processes (default: cores)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
-    p.add_argument("--chunk-size", type=_positive_int, default=None, help="runs per chunk")
-    p.add_argument("--runs", type=_positive_int, default=None, help="initial states per row (overrides spec)")
+    p.add_argument("--chunk-size", type=positive_int, default=None, help="runs per chunk")
+    p.add_argument("--runs", type=positive_int, default=None, help="initial states per row (overrides spec)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial states (overrides spec)")
     p.add_argument(
         "--backend",

@@ -152,20 +152,8 @@ class DynamicRule(EtaRule):
         return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
 
 
-@dataclass(frozen=True)
-class StaticRule(TriggerRule):
-    """Absolute-threshold rule ``gamma(|e|) >= eps`` (eq. (15) with ``sigma = 0``).
-
-    It has no internal state; it transmits exactly when :class:`DynamicRule` with
-    ``sigma = 0`` and the same ``gamma`` and ``eps`` does.
-    """
-
-    gamma: KFunction
-    eps: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+class StatelessRule(TriggerRule):
+    """Base of the rules without internal state: nothing flows, nothing is reset."""
 
     @property
     def n_state(self) -> int:
@@ -179,11 +167,27 @@ class StaticRule(TriggerRule):
     ) -> np.ndarray:
         return np.empty((t.shape[0], 0))
 
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return self.gamma(_norm(e)) - self.eps
-
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         return s
+
+
+@dataclass(frozen=True)
+class StaticRule(StatelessRule):
+    """Absolute-threshold rule ``gamma(|e|) >= eps`` (eq. (15) with ``sigma = 0``).
+
+    It has no internal state; it transmits exactly when :class:`DynamicRule` with
+    ``sigma = 0`` and the same ``gamma`` and ``eps`` does.
+    """
+
+    gamma: KFunction
+    eps: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
+        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        return self.gamma(_norm(e)) - self.eps
 
 
 def send_on_delta(delta: float) -> StaticRule:
@@ -243,7 +247,7 @@ class PeriodicRule(TriggerRule):
 
 
 @dataclass(frozen=True)
-class RelativeRule(TriggerRule):
+class RelativeRule(StatelessRule):
     """Relative-threshold baseline: transmit when ``|e| >= rho |ytilde| + eps``.
 
     The threshold scales with the size of the measurement, a common rule in the
@@ -271,22 +275,7 @@ class RelativeRule(TriggerRule):
         object.__setattr__(self, "rho", v.real("rho", self.rho, lower=0.0, lower_open=True))
         object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
 
-    @property
-    def n_state(self) -> int:
-        return 0
-
-    def initial_state(self) -> np.ndarray:
-        return np.empty(0)
-
-    def derivative(
-        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
-    ) -> np.ndarray:
-        return np.empty((t.shape[0], 0))
-
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         if y is None:
             raise InputError("RelativeRule.trigger needs the current measurement `y`; got None")
         return _norm(e) - self.rho * _norm(y) - self.eps
-
-    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return s

@@ -1,0 +1,37 @@
+"""Argument helpers shared by the commands: positive integers, TOML specs by file or name."""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from etobs.experiments.spec import SpecError
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer ``>= 1``."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer; got {text!r}")
+    return value
+
+
+def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, Any]:
+    """The TOML spec ``name``: a packaged one (``package/data/packaged[name]``) or a file."""
+    if name in packaged:
+        text = resources.files(package).joinpath("data", packaged[name]).read_text()
+    else:
+        path = Path(name)
+        if not path.is_file():
+            raise SpecError(f"SPEC must be a TOML file or one of {', '.join(packaged)}; got {name!r}")
+        text = path.read_text(encoding="utf-8")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
