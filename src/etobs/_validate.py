@@ -108,7 +108,7 @@ def function(name: str, value: Any) -> Callable[..., Any]:
     return value
 
 
-def index_tuple(name: str, value: Any) -> tuple[int, ...]:
+def index_tuple(name: str, value: Any, what: str = "output") -> tuple[int, ...]:
     """Return a non-empty tuple of distinct non-negative integers."""
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
         value = (int(value),)
@@ -117,7 +117,7 @@ def index_tuple(name: str, value: Any) -> tuple[int, ...]:
     except TypeError as exc:
         raise InputTypeError(f"`{name}` must be an int or a sequence of ints; got {value!r}") from exc
     if not items:
-        raise InputError(f"`{name}` must name at least one output index; got an empty sequence")
+        raise InputError(f"`{name}` must name at least one {what} index; got an empty sequence")
     out = tuple(integer(f"{name}[{k}]", v, lower=0) for k, v in enumerate(items))
     if len(set(out)) != len(out):
         raise InputError(f"`{name}` must not repeat an index; got {list(out)}")

@@ -168,9 +168,12 @@ def test_rule_errors_at_run_time_name_the_entry_and_node():
     spec = parse_compare_spec({**SPEC, "rules": [{"name": "bad", "kind": "periodic", "period": [0.1, 0.2]}]})
     with pytest.raises(SpecError, match=r"`rules\['bad'\].period` has 2 values but the problem has 1 nodes"):
         compare(spec)
-    spec = parse_compare_spec({**SPEC, "rules": [{"name": "neg", "kind": "relative", "rho": -1, "eps": 1}]})
+    rules = [{"name": "fine", "kind": "base"}, {"name": "neg", "kind": "relative", "rho": -1, "eps": 1}]
+    spec = parse_compare_spec({**SPEC, "rules": rules})
+    ran = []
     with pytest.raises(SpecError, match=r"`rules\['neg'\]`, node 0: `rho` must be > 0; got -1"):
-        compare(spec)
+        compare(spec, on_entry=lambda key, e: ran.append(key))
+    assert ran == []  # every entry is checked before the first one runs
 
 
 def test_cli_bad_spec_exits_2(tmp_path, capsys):

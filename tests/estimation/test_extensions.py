@@ -159,3 +159,42 @@ def test_problem_defaults_keep_the_paper_layout():
     pb = linear.problem(StaticRule(gamma=Linear(1.0), eps=0.1))
     assert isinstance(pb, EstimationProblem) and not pb.extended
     assert pb.layout.n == 2 + 2 + 1 and pb.layout.run is None
+
+
+def test_rules_written_without_y_keep_working():
+    """A user rule with the pre-`y` signature trigger(t, e, s): y is passed only to rules
+    that declare reads_y."""
+    from etobs.model.rules import StatelessRule
+
+    class Band(StatelessRule):
+        def trigger(self, t, e, s):
+            return np.abs(e[:, 0]) - 0.05
+
+    res = simulate(linear.problem(Band()), X0[:1], 3.0, z0=Z0)
+    assert res.ok and len(res.transmissions) > 5
+
+
+def test_relative_rule_reads_the_measurement_also_with_the_observer_copy():
+    rule = RelativeRule(rho=0.2, eps=0.01)
+    pb = linear.problem(rule, hold="innovation")
+    res = simulate(pb, X0[:1], 5.0, z0=Z0, save=SaveAt(steps=True))
+    a = res.solution.arcs[0]
+    rows = _jump_rows(a, res.transmission_times(0, 0))
+    assert rows.size > 3
+    x, z = a.x[rows][:, pb.layout.x], a.x[rows][:, pb.layout.z]
+    y = pb.ytilde(a.t[rows], x)
+    innov = y - pb.plant.h(pb.psi(z))
+    gap = a.x[rows][:, pb.layout.ybar] - innov
+    np.testing.assert_allclose(np.abs(gap[:, 0]), 0.2 * np.abs(y[:, 0]) + 0.01, atol=1e-7)
+
+
+def test_input_node_arguments_give_clear_errors():
+    rule = StaticRule(gamma=Linear(1.0), eps=0.1)
+    with pytest.raises(
+        InputTypeError, match=r"`input_nodes` must be a list or tuple of InputNode objects; got NoneType"
+    ):
+        linear.problem(rule, input_nodes=None)
+    with pytest.raises(InputTypeError, match=r"got InputNode"):
+        linear.problem(rule, input_nodes=InputNode((0,), rule))
+    with pytest.raises(InputError, match=r"`inputs` must name at least one input index"):
+        InputNode((), rule)

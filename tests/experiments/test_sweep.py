@@ -99,7 +99,7 @@ def test_factory_errors_name_the_problem(tmp_path):
 def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
     marker = tmp_path / "died"
     spec = parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"die_marker": str(marker)}}))
-    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=2, progress=False).complete
+    res = run_sweep(spec, tmp_path / "out", executor="process", workers=2, chunk=2, progress=False)
     assert marker.exists()  # one worker really died
     assert res.complete
     keys = [(r["row"], r["scenario"], r["run"]) for r in res.runs]
@@ -196,7 +196,7 @@ def test_executor_errors(tiny, tmp_path):
 
 def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_path):
     failing = parse_spec(raw_spec(rows=[{"k": 1.0, "fail": True}]))
-    first = run_sweep(failing, tmp_path, executor="serial", chunk=2, progress=False).complete
+    first = run_sweep(failing, tmp_path, executor="serial", chunk=2, progress=False)
     assert len(first.failures) == 6
     # Same key space is not shared (fail=True is a parameter); simulate a fixed factory by
     # storing the runs under the failing key through a successful spec with that key.

@@ -13,8 +13,10 @@ On an ideal network both are the same entries of the state. With a
 its packets in flight and its counters; a second jump rule per channel delivers the
 packet whose arrival time has come (see :mod:`etobs.model.network`).
 
-Jump rules: ``0 .. C-1`` are the channels' transmissions, ``C .. 2C-1`` (with a
-network) the deliveries.
+Jump rules: ``0 .. C-1`` are the channels' transmissions. With a network the
+deliveries come first, ``0 .. C-1``, and the transmissions are ``C .. 2C-1``: at one
+instant the solver jumps in rule order, so a packet arriving when its node sends again
+leaves the link before the new one enters it.
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ if TYPE_CHECKING:
 #: Arrival time of an empty packet slot (finite: the solver rejects non-finite states).
 EMPTY = 1e30
 #: Entries of a channel's network block before its packet slots.
-SEQ, APPLIED, LOST, OVERFLOW, STALE = range(5)
-N_META = 5
+SEQ, APPLIED, LOST, OVERFLOW, STALE, N_APPLIED = range(6)
+N_META = 6
 
 
 @dataclass(frozen=True)
@@ -95,12 +97,27 @@ class _Assembly:
         yhat = pb.plant.h(pb.psi(q[:, lay.z])) if need_yhat else yt
         return yt, u, yhat
 
-    def _source(self, ch: Channel, yt: np.ndarray, u: np.ndarray, yhat: np.ndarray) -> np.ndarray:
+    def _source(
+        self, ch: Channel, yt: np.ndarray, u: np.ndarray, yhat: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """What the channel sends, and the current measurement its rule may read."""
         if ch.kind == "u":
-            return u[:, ch.index]
+            return u[:, ch.index], u[:, ch.index]
         if self.innovation:  # Remark 3: the node's observer copy gives yhat_i
-            return yt[:, ch.index] - yhat[:, ch.index]
-        return yt[:, ch.index]
+            return yt[:, ch.index] - yhat[:, ch.index], yt[:, ch.index]
+        return yt[:, ch.index], yt[:, ch.index]
+
+    @staticmethod
+    def _trigger(ch: Channel, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray) -> np.ndarray:
+        if ch.rule.reads_y:
+            return ch.rule.trigger(t, e, s, y=y)
+        return ch.rule.trigger(t, e, s)
+
+    @staticmethod
+    def _derivative(ch: Channel, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray) -> np.ndarray:
+        if ch.rule.reads_y:
+            return ch.rule.derivative(t, e, s, y=y)
+        return ch.rule.derivative(t, e, s)
 
     # -- flow, guard, jump ---------------------------------------------------------
     def flow(self, t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -120,34 +137,39 @@ class _Assembly:
         out[:, lay.z] = pb.observer.f_o(t, z, ubar, ybar, yhat)  # eq. (7)
         for ch in self.channels:
             if ch.rule_state.stop > ch.rule_state.start:
-                sig = self._source(ch, yt, u, yhat)
+                sig, meas = self._source(ch, yt, u, yhat)
                 e = q[:, ch.sent] - sig
-                out[:, ch.rule_state] = ch.rule.derivative(t, e, q[:, ch.rule_state], y=sig)  # eq. (14)
+                out[:, ch.rule_state] = self._derivative(
+                    ch, t, e, q[:, ch.rule_state], meas
+                )  # eq. (14), (52)
         return out
 
     def guard(self, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         yt, u, yhat = self._parts(t, q, need_yhat=self.innovation)
         n_ch = len(self.channels)
-        g = np.empty((q.shape[0], n_ch * (2 if self.networked else 1)))
+        off = n_ch if self.networked else 0  # deliveries first (see the module docstring)
+        g = np.empty((q.shape[0], n_ch + off))
         for c, ch in enumerate(self.channels):
-            sig = self._source(ch, yt, u, yhat)
-            g[:, c] = ch.rule.trigger(t, q[:, ch.sent] - sig, q[:, ch.rule_state], y=sig)  # eq. (15), (18)
+            sig, meas = self._source(ch, yt, u, yhat)
+            g[:, off + c] = self._trigger(ch, t, q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # (15), (53)
             if self.networked:
                 arrival = q[:, slot_columns(ch)[0]].min(axis=1)
-                g[:, n_ch + c] = np.maximum(t - arrival, -1.0)  # a packet's arrival time has come
+                g[:, c] = np.maximum(t - arrival, -1.0)  # a packet's arrival time has come
         return g
 
     def jump(self, k: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         n_ch = len(self.channels)
-        if k < n_ch:
+        if not self.networked:
             return self._send(self.channels[k], k, t, q)
-        return self._deliver(self.channels[k - n_ch], t, q)
+        if k < n_ch:
+            return self._deliver(self.channels[k], t, q)
+        return self._send(self.channels[k - n_ch], k - n_ch, t, q)
 
     def _send(self, ch: Channel, c: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         # eq. (22): the node sends its current value (e+ = 0) and resets its own rule
         # state; every other node is untouched.
         yt, u, yhat = self._parts(t, q, need_yhat=self.innovation)
-        sig = self._source(ch, yt, u, yhat)
+        sig, _ = self._source(ch, yt, u, yhat)
         qn = q.copy()
         qn[:, ch.sent] = sig
         qn[:, ch.rule_state] = ch.rule.reset(t, q[:, ch.rule_state])
@@ -165,6 +187,7 @@ class _Assembly:
             elif delay == 0.0:
                 qn[r, ch.held] = sig[r]
                 qn[r, meta + APPLIED] = seq
+                qn[r, meta + N_APPLIED] += 1.0
             else:
                 free = np.flatnonzero(q[r, arrival] >= EMPTY)
                 if not free.size:
@@ -191,6 +214,7 @@ class _Assembly:
             if q[r, seqcol[s]] > q[r, meta + APPLIED]:
                 qn[r, ch.held] = q[r, values[s]]
                 qn[r, meta + APPLIED] = q[r, seqcol[s]]
+                qn[r, meta + N_APPLIED] += 1.0
             else:
                 qn[r, meta + STALE] += 1.0
         return qn
@@ -205,8 +229,14 @@ class _Assembly:
     def system(self) -> HybridSystem:
         names = tuple(ch.name for ch in self.channels)
         if self.networked:
-            names = names + tuple(f"deliver {n}" for n in names)
+            names = tuple(f"deliver {n}" for n in names) + names
         jump: Callable[[int, np.ndarray, np.ndarray], np.ndarray] = self.jump
         return HybridSystem(
-            n=self.lay.n, n_rules=len(names), flow=self.flow, guard=self.guard, jump=jump, rule_names=names
+            n=self.lay.n,
+            n_rules=len(names),
+            flow=self.flow,
+            guard=self.guard,
+            jump=jump,
+            rule_names=names,
+            n_flow=self.lay.n_flow,
         )

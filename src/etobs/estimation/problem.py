@@ -42,6 +42,7 @@ class StateLayout:
     channels: tuple[Channel, ...]
     run: int | None
     n: int
+    n_flow: int | None = None  # entries from here on are constant along flows (the network's)
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,11 @@ class EstimationProblem:
                 f"observer `n_z` = {self.observer.n_z} is smaller than the plant's n_x = {p.n_x}"
             )
         _check_partition(nodes, p.n_y)
+        if isinstance(self.input_nodes, InputNode) or not isinstance(self.input_nodes, tuple | list):
+            raise InputTypeError(
+                "`input_nodes` must be a list or tuple of InputNode objects; "
+                f"got {type(self.input_nodes).__name__}"
+            )
         inputs = tuple(self.input_nodes)
         if not all(isinstance(nd, InputNode) for nd in inputs):
             raise InputTypeError("`input_nodes` must be a sequence of InputNode objects")
@@ -261,8 +267,10 @@ def _layout(
     held += [ubar.start + np.arange(a, b) for a, b in itertools.pairwise(offsets)]
     n_ch = len(everyone)
     sent, nets, links = list(held), [None] * n_ch, [None] * n_ch
+    n_flow = None
     if network is not None:
         sent_block = take(plant.n_y + n_ubar)
+        n_flow = sent_block.start
         sent = [h - ybar.start + sent_block.start for h in held]
         for c, idx in enumerate(index):
             link = network.link(c, n_ch)
@@ -286,7 +294,16 @@ def _layout(
         for c in range(n_ch)
     )
     return StateLayout(
-        x=x, z=z, ybar=ybar, ubar=ubar, rule=rule, outputs=outputs, channels=channels, run=run, n=k
+        x=x,
+        z=z,
+        ybar=ybar,
+        ubar=ubar,
+        rule=rule,
+        outputs=outputs,
+        channels=channels,
+        run=run,
+        n=k,
+        n_flow=n_flow,
     )
 
 

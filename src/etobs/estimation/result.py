@@ -83,8 +83,9 @@ class EstimationResult:
         log = self.solution.jumps
         if self.problem.network is None:
             return log
-        keep = log.rule < self.problem.n_channels
-        return JumpLog(log.run[keep], log.rule[keep], log.t[keep], log.j[keep])
+        C = self.problem.n_channels  # with a network, rules 0..C-1 are the deliveries
+        keep = log.rule >= C
+        return JumpLog(log.run[keep], log.rule[keep] - C, log.t[keep], log.j[keep])
 
     @property
     def deliveries(self) -> JumpLog:
@@ -95,8 +96,8 @@ class EstimationResult:
         one applied) has a row but was not applied (see :meth:`network_stats`).
         """
         log = self.solution.jumps
-        keep = log.rule >= self.problem.n_channels
-        return JumpLog(log.run[keep], log.rule[keep] - self.problem.n_channels, log.t[keep], log.j[keep])
+        keep = (log.rule < self.problem.n_channels) & (self.problem.network is not None)
+        return JumpLog(log.run[keep], log.rule[keep], log.t[keep], log.j[keep])
 
     def network_stats(self) -> dict[str, np.ndarray]:
         """Fate of every node's packets over the whole run, arrays of shape ``(B, C)``.
@@ -104,18 +105,18 @@ class EstimationResult:
         Keys: ``sent``; ``lost`` (by the loss process); ``overflow`` (dropped at a full
         link); ``stale`` (arrived after a newer packet, dropped); ``in_flight`` (not
         arrived by the end of the run); ``applied`` (used by the observer). The counts add
-        up: ``sent = lost + overflow + stale + in_flight + applied``.
+        up: ``sent = lost + overflow + stale + in_flight + applied``; each is counted
+        apart (``applied`` counts the packets the observer used).
         """
         pb = self.problem
         if pb.network is None:
             raise InputError("this problem has no network: give EstimationProblem(network=Network(...))")
-        from etobs.estimation.assembly import EMPTY, LOST, OVERFLOW, STALE, slot_columns
+        from etobs.estimation.assembly import EMPTY, LOST, N_APPLIED, OVERFLOW, STALE, slot_columns
 
         q = self.solution.x_final
         C = pb.n_channels
-        out = {
-            k: np.zeros((self.n_runs, C), dtype=np.int64) for k in ("lost", "overflow", "stale", "in_flight")
-        }
+        keys = ("lost", "overflow", "stale", "in_flight", "applied")
+        out = {k: np.zeros((self.n_runs, C), dtype=np.int64) for k in keys}
         sent = self.transmissions.counts(self.n_runs, C)
         for c, ch in enumerate(pb.layout.channels):
             assert ch.net is not None
@@ -123,9 +124,9 @@ class EstimationResult:
             out["lost"][:, c] = q[:, meta + LOST]
             out["overflow"][:, c] = q[:, meta + OVERFLOW]
             out["stale"][:, c] = q[:, meta + STALE]
+            out["applied"][:, c] = q[:, meta + N_APPLIED]
             out["in_flight"][:, c] = np.sum(q[:, slot_columns(ch)[0]] < EMPTY, axis=1)
-        applied = sent - out["lost"] - out["overflow"] - out["stale"] - out["in_flight"]
-        return {"sent": sent, **out, "applied": applied}
+        return {"sent": sent, **out}
 
     def status_labels(self) -> list[str]:
         """Status of each run (``"completed"``, ``"max_jumps"``, ...)."""

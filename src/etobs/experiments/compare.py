@@ -40,9 +40,9 @@ class EntryResult:
         ``max |x - xhat|`` on the error window (NaN for runs that failed).
     min_inter_event_time : ndarray, shape (B, C)
         NaN where a node sent fewer than twice.
-    not_applied : ndarray of int, shape (B, C) or None
+    not_applied, packets : ndarray of int, shape (B, C) or None
         Packets sent but never applied by the observer (lost, dropped, stale or still in
-        flight); ``None`` on the ideal network.
+        flight), and all packets sent, over the whole run; ``None`` on the ideal network.
 
     """
 
@@ -54,6 +54,7 @@ class EntryResult:
     error: np.ndarray
     min_inter_event_time: np.ndarray
     not_applied: np.ndarray | None
+    packets: np.ndarray | None
     seconds: float
 
     def to_json(self) -> dict[str, Any]:
@@ -73,6 +74,7 @@ class EntryResult:
             "error": [None if not np.isfinite(v) else float(v) for v in self.error],
             "min_inter_event_time": plain(self.min_inter_event_time),
             "not_applied": None if self.not_applied is None else self.not_applied.tolist(),
+            "packets": None if self.packets is None else self.packets.tolist(),
             "seconds": self.seconds,
         }
 
@@ -92,6 +94,7 @@ class EntryResult:
             error=np.array([np.nan if v is None else v for v in d["error"]], dtype=float),
             min_inter_event_time=arr(d["min_inter_event_time"]),
             not_applied=None if d["not_applied"] is None else np.array(d["not_applied"], dtype=np.int64),
+            packets=None if d["packets"] is None else np.array(d["packets"], dtype=np.int64),
             seconds=float(d["seconds"]),
         )
 
@@ -120,8 +123,8 @@ class Comparison:
             for c, n in enumerate(self.node_names):
                 col = e.min_inter_event_time[ok, c]
                 row[f"min inter-event {n}"] = float(np.nanmin(col)) if np.isfinite(col).any() else np.nan
-            if e.not_applied is not None and ok.any():
-                sent = e.transmissions[ok].sum()
+            if e.not_applied is not None and e.packets is not None and ok.any():
+                sent = e.packets[ok].sum()  # over the whole run, like not_applied
                 row["not applied"] = float(e.not_applied[ok].sum() / sent) if sent else 0.0
             else:
                 row["not applied"] = np.nan
@@ -236,18 +239,22 @@ def compare(
             f"but the plant has n_x = {base.plant.n_x}"
         )
     done = dict(done or {})
-    entries, skipped = [], []
+    # every problem is built (and so checked) before the first entry runs
+    todo, skipped = [], []
     for network in spec.networks:
         for rule in spec.rules:
             if rule.observer_copy and network.network is not None:
                 skipped.append((rule.name, network.name, _COPY_NEEDS_IDEAL))
-                continue
-            key = entry_key(spec, rule, network)
-            if key not in done:
-                done[key] = _run_entry(spec, rule.apply(base, network.network), rule, network, x0)
-                if on_entry is not None:
-                    on_entry(key, done[key])
-            entries.append(done[key])
+            else:
+                todo.append((rule, network, rule.apply(base, network.network)))
+    entries = []
+    for rule, network, problem in todo:
+        key = entry_key(spec, rule, network)
+        if key not in done:
+            done[key] = _run_entry(spec, problem, rule, network, x0)
+            if on_entry is not None:
+                on_entry(key, done[key])
+        entries.append(done[key])
     names = tuple(ch.name for ch in base.layout.channels)
     return Comparison(spec=spec, node_names=names, entries=tuple(entries), skipped=tuple(skipped))
 
@@ -263,10 +270,10 @@ def _run_entry(
     seconds = time.perf_counter() - start
     tx = transmission_counts(res, spec.metrics.transmissions_window, nodes="all")
     mins = min_inter_event_time(res, nodes="all")
-    not_applied = None
+    not_applied = packets = None
     if problem.network is not None:
         st = res.network_stats()
-        not_applied = st["sent"] - st["applied"]
+        not_applied, packets = st["sent"] - st["applied"], st["sent"]
     return EntryResult(
         rule=rule.name,
         network=network.name,
@@ -276,6 +283,7 @@ def _run_entry(
         error=max_estimation_error(res, (lo, hi)),
         min_inter_event_time=mins,
         not_applied=not_applied,
+        packets=packets,
         seconds=seconds,
     )
 

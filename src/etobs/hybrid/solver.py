@@ -130,6 +130,7 @@ class _FastSolver:
         self.err_exp = -1.0 / (self.tab.error_order + 1)
         b, n = x0.shape
         self.B, self.n, self.m = b, n, system.n_rules
+        self.n_flow = n if system.n_flow is None else system.n_flow
         self.t = np.full(b, t0)
         self.x = x0.copy()
         self.j = np.zeros(b, dtype=np.int64)
@@ -201,7 +202,9 @@ class _FastSolver:
     def _initial_step(self, runs: np.ndarray) -> np.ndarray:
         """Hairer, Nørsett & Wanner (1993), II.4: a first step from two flow evaluations."""
         o = self.opts
-        t, x, f = self.t[runs], self.x[runs], self.f[runs]
+        t, x_all, f_all = self.t[runs], self.x[runs], self.f[runs]
+        nf = self.n_flow  # entries constant along flows are left out of the norms
+        x, f = (np.ascontiguousarray(a[:, :nf]) for a in (x_all, f_all)) if nf < self.n else (x_all, f_all)
         remaining = self.t_end - t
         scale = o.atol + o.rtol * np.abs(x)
         d0 = np.sqrt(np.mean((x / scale) ** 2, axis=1))
@@ -209,8 +212,9 @@ class _FastSolver:
         with np.errstate(divide="ignore", invalid="ignore"):
             h0 = np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / d1)
         h0 = np.minimum(h0, np.maximum(remaining, 1e-12))
-        f1 = self.flow(t + h0, x + h0[:, None] * f)
-        d2 = np.sqrt(np.mean(((f1 - f) / scale) ** 2, axis=1)) / h0
+        f1 = self.flow(t + h0, x_all + h0[:, None] * f_all)
+        df = np.ascontiguousarray(f1[:, :nf]) - f if nf < self.n else f1 - f
+        d2 = np.sqrt(np.mean((df / scale) ** 2, axis=1)) / h0
         big = np.maximum(d1, d2)
         with np.errstate(divide="ignore"):
             h1 = np.where(
@@ -260,7 +264,13 @@ class _FastSolver:
         h = np.minimum(np.minimum(self.h[act], o.max_step), remaining)
         last = h >= remaining
         K, x_new = tab.step(self.flow, t, x, f, h)
-        err = tab.error_norm(K, h, x, x_new, o.rtol, o.atol)
+        if self.n_flow < self.n:  # entries constant along flows are left out of the norm
+            # (contiguous copies: a run's rounding must not depend on its batch)
+            nf = self.n_flow
+            K_, x_, xn_ = (np.ascontiguousarray(a[..., :nf]) for a in (K, x, x_new))
+            err = tab.error_norm(K_, h, x_, xn_, o.rtol, o.atol)
+        else:
+            err = tab.error_norm(K, h, x, x_new, o.rtol, o.atol)
         finite = np.isfinite(err) & np.all(np.isfinite(x_new), axis=1)
         finite &= np.all(np.isfinite(K[-1]), axis=1)
         accept = finite & (err <= 1.0)

@@ -38,6 +38,10 @@ class HybridSystem:
         ``jump(k, t, x) -> x+`` applies rule ``k`` to the rows given, shape ``(M, n)``.
     rule_names : tuple of str, optional
         Names of the rules, used in messages and logs.
+    n_flow : int, optional
+        When given, only the entries ``0 .. n_flow-1`` change along flows; the others
+        (counters, buffers, identifiers) have zero derivative. The fast solver then
+        leaves them out of its error norm, so that they do not dilute the tolerance.
 
     """
 
@@ -47,10 +51,17 @@ class HybridSystem:
     guard: GuardFn
     jump: JumpFn
     rule_names: tuple[str, ...] = ()
+    n_flow: int | None = None
 
     def __post_init__(self) -> None:
         v.integer("n", self.n, lower=1)
         v.integer("n_rules", self.n_rules, lower=0)
+        if self.n_flow is not None:
+            v.integer("n_flow", self.n_flow, lower=1)
+            if self.n_flow > self.n:
+                from etobs.errors import InputError
+
+                raise InputError(f"`n_flow` must be <= n = {self.n}; got {self.n_flow}")
         v.function("flow", self.flow)
         v.function("guard", self.guard)
         v.function("jump", self.jump)

@@ -31,6 +31,7 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 
 _BLOCK = 256  # packets drawn at once per stream
+MAX_DELAY = 1e9  # seconds; far below the solver's empty-slot marker
 
 
 class Delay(ABC):
@@ -53,7 +54,7 @@ class ConstantDelay(Delay):
     d: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "d", v.real("d", self.d, lower=0.0))
+        object.__setattr__(self, "d", v.real("d", self.d, lower=0.0, upper=MAX_DELAY))
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         return np.full(n, self.d)
@@ -72,7 +73,7 @@ class UniformDelay(Delay):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "low", v.real("low", self.low, lower=0.0))
-        object.__setattr__(self, "high", v.real("high", self.high, lower=self.low))
+        object.__setattr__(self, "high", v.real("high", self.high, lower=self.low, upper=MAX_DELAY))
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         return rng.uniform(self.low, self.high, n)
@@ -90,8 +91,10 @@ class ExponentialDelay(Delay):
     minimum: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "scale", v.real("scale", self.scale, lower=0.0, lower_open=True))
-        object.__setattr__(self, "minimum", v.real("minimum", self.minimum, lower=0.0))
+        object.__setattr__(
+            self, "scale", v.real("scale", self.scale, lower=0.0, lower_open=True, upper=MAX_DELAY / 100)
+        )
+        object.__setattr__(self, "minimum", v.real("minimum", self.minimum, lower=0.0, upper=MAX_DELAY))
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         return self.minimum + rng.exponential(self.scale, n)
@@ -296,7 +299,7 @@ class PacketStream:
                 assert isinstance(loss, Loss)
                 lost, self._state = loss.draw(self._rng, _BLOCK, self._state)
             assert isinstance(self._link.delay, Delay)
-            delay = self._link.delay.sample(self._rng, _BLOCK)
+            delay = np.minimum(self._link.delay.sample(self._rng, _BLOCK), MAX_DELAY)
             self._lost = np.concatenate([self._lost, lost])
             self._delay = np.concatenate([self._delay, delay])
         return bool(self._lost[k - 1]), float(self._delay[k - 1])

@@ -45,6 +45,6 @@ class InputNode:
     name: str = ""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "inputs", v.index_tuple("inputs", self.inputs))
+        object.__setattr__(self, "inputs", v.index_tuple("inputs", self.inputs, "input"))
         if not isinstance(self.rule, TriggerRule):
             raise InputTypeError(f"`rule` must be a TriggerRule; got {type(self.rule).__name__}")

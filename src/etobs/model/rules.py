@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -36,7 +37,13 @@ def _norm(e: np.ndarray) -> np.ndarray:
 
 
 class TriggerRule(ABC):
-    """Interface of a node's triggering rule (see the module docstring)."""
+    """Interface of a node's triggering rule (see the module docstring).
+
+    A rule that reads the current measurement sets ``reads_y = True``; only then is
+    ``y=`` passed, so rules written as ``trigger(t, e, s)`` keep working.
+    """
+
+    reads_y: ClassVar[bool] = False
 
     @property
     @abstractmethod
@@ -270,6 +277,7 @@ class RelativeRule(StatelessRule):
 
     rho: float
     eps: float
+    reads_y: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rho", v.real("rho", self.rho, lower=0.0, lower_open=True))
