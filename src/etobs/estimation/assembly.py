@@ -89,11 +89,13 @@ class _Assembly:
         self.u_held = [ch for ch in self.channels if ch.kind == "u"]
 
     # -- the signals every channel reads -------------------------------------------
-    def _parts(self, t: np.ndarray, q: np.ndarray, need_yhat: bool) -> tuple[np.ndarray, ...]:
+    def _parts(
+        self, t: np.ndarray, q: np.ndarray, need_yhat: bool, need_u: bool = True
+    ) -> tuple[np.ndarray, ...]:
         pb, lay = self.pb, self.lay
         x = q[:, lay.x]
         yt = pb.ytilde(t, x)
-        u = pb.u(t)
+        u = pb.u(t) if need_u else np.empty((t.shape[0], 0))  # the guard reads u only for input nodes
         yhat = pb.plant.h(pb.psi(q[:, lay.z])) if need_yhat else yt
         return yt, u, yhat
 
@@ -145,7 +147,7 @@ class _Assembly:
         return out
 
     def guard(self, t: np.ndarray, q: np.ndarray) -> np.ndarray:
-        yt, u, yhat = self._parts(t, q, need_yhat=self.innovation)
+        yt, u, yhat = self._parts(t, q, need_yhat=self.innovation, need_u=bool(self.u_held))
         n_ch = len(self.channels)
         off = n_ch if self.networked else 0  # deliveries first (see the module docstring)
         g = np.empty((q.shape[0], n_ch + off))
@@ -168,7 +170,7 @@ class _Assembly:
     def _send(self, ch: Channel, c: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         # eq. (22): the node sends its current value (e+ = 0) and resets its own rule
         # state; every other node is untouched.
-        yt, u, yhat = self._parts(t, q, need_yhat=self.innovation)
+        yt, u, yhat = self._parts(t, q, need_yhat=self.innovation, need_u=bool(self.u_held))
         sig, _ = self._source(ch, yt, u, yhat)
         qn = q.copy()
         qn[:, ch.sent] = sig
