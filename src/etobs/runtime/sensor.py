@@ -111,11 +111,34 @@ class SensorNode:
         self.sent = y
 
 
-def udp_sender(host: str, port: int) -> Callable[[bytes], object]:
-    """A function sending each packet as one UDP datagram to ``(host, port)``."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    address = (host, port)
-    return lambda data: sock.sendto(data, address)
+class UdpSender:
+    """Send each packet as one UDP datagram to ``(host, port)``; close when done.
+
+    On loopback the socket is bound to 127.0.0.1, so nothing listens beyond the machine.
+    """
+
+    def __init__(self, host: str, port: int) -> None:
+        self.address = (host, port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if host in ("127.0.0.1", "localhost"):
+            self.sock.bind(("127.0.0.1", 0))
+
+    def __call__(self, data: bytes) -> None:
+        self.sock.sendto(data, self.address)
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> UdpSender:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def udp_sender(host: str, port: int) -> UdpSender:
+    """A :class:`UdpSender` to ``(host, port)``."""
+    return UdpSender(host, port)
 
 
 def run(

@@ -100,7 +100,7 @@ class ObserverServer:
                 now = self.now()
                 target = min(now - self.hold_back, t_end)
                 self.core.advance(target)
-                if fh is not None and target >= next_tick:
+                if fh is not None and (target >= next_tick or target >= t_end):  # the end always
                     fh.write(json.dumps(self.core.snapshot()) + "\n")
                     next_tick = target + self.tick
                 if target >= t_end:

@@ -1,0 +1,117 @@
+"""Sampled rules: the eta filter's exact discretization, and agreement with the simulator."""
+
+import math
+
+import numpy as np
+import pytest
+
+from etobs import simulate
+from etobs.examples import robot_arm
+from etobs.runtime.sampled_rule import RuleSpecError, SampledRule
+from etobs.runtime.spec import rule_spec
+
+DYN = {
+    "kind": "dynamic",
+    "gamma": ["quadratic", 5.0],
+    "alpha": ["linear", 2.0],
+    "sigma": 600.0,
+    "c": 0.001,
+    "b": 1.0,
+    "eps": 10.0,
+    "eta0": 10.0,
+}
+
+
+def test_linear_filter_is_exact_for_a_held_gap():
+    """With e held at 0.5 (never firing: sigma alpha(eta) large), eta follows
+    eta(t) = e^{-2t} eta0 + c gamma(0.5) (1 - e^{-2t}) / 2 exactly, at every sample."""
+    rule = SampledRule(DYN | {"eps": 1e9}, period=0.01)
+    forcing = 0.001 * 5.0 * 0.25
+    for k in range(1, 301):
+        assert not rule.decide([0.5], [0.0])
+        t = 0.01 * k
+        assert rule.eta == pytest.approx(
+            math.exp(-2 * t) * 10.0 + forcing * (1 - math.exp(-2 * t)) / 2, rel=1e-12
+        )
+
+
+def test_nonlinear_filter_matches_the_closed_form_of_a_quadratic_decay():
+    """alpha(s) = s^2, no forcing: eta' = -eta^2 gives eta(t) = eta0 / (1 + eta0 t)."""
+    spec = DYN | {"alpha": ["power", 1.0, 2.0], "eps": 1e9, "eta0": 2.0}
+    rule = SampledRule(spec, period=0.05)
+    for k in range(1, 41):
+        rule.decide([0.0], [0.0])
+        assert rule.eta == pytest.approx(2.0 / (1 + 2.0 * 0.05 * k), rel=1e-7)
+
+
+def test_decision_and_jump_follow_eq_14_15():
+    rule = SampledRule(DYN | {"b": 0.5}, period=0.001)
+    eta = rule.eta
+    assert not rule.decide([0.1], [0.0])  # 5 * 0.01 < 600 * 2 * 10 + 10
+    big = math.sqrt((600 * 2 * rule.eta + 10) / 5) + 1e-6
+    before = rule.eta
+    assert rule.decide([big], [0.0])
+    decay = math.exp(-2 * 0.001)
+    assert rule.eta == pytest.approx(decay * 0.5 * before, rel=1e-12)  # eta+ = b eta, then a quiet period
+    assert eta > before
+
+
+def test_periodic_static_relative():
+    per = SampledRule({"kind": "periodic", "period": 0.05, "first": 0.05}, period=0.01)
+    fired = [per.decide([0.0], [0.0]) for _ in range(20)]
+    assert [k for k, f in enumerate(fired) if f] == [4, 9, 14, 19]
+    sta = SampledRule({"kind": "static", "gamma": ["linear", 1.0], "eps": 0.1}, period=0.01)
+    assert sta.decide([0.1], [0.0]) and not sta.decide([0.0999], [0.0])
+    rel = SampledRule({"kind": "relative", "rho": 0.1, "eps": 0.01}, period=0.01)
+    assert rel.decide([0.2101], [2.0]) and not rel.decide([0.2099], [2.0])  # 0.1 * 2 + 0.01
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ({"kind": "magic"}, r"`kind` must be dynamic, static, periodic or relative; got 'magic'"),
+        (DYN | {"gamma": ["cubic", 1.0]}, r"`gamma` must be \['linear', a\]"),
+        (DYN | {"sigma": -1.0}, r"`sigma` must be >= 0; got -1.0"),
+        ({k: v for k, v in DYN.items() if k != "eps"}, r"missing key `eps`"),
+        (DYN | {"b": 2.0}, r"`b` must be <= 1; got 2.0"),
+        ({"kind": "periodic", "period": 0.015}, r"must be a multiple of the sampling period 0.01"),
+        ({"kind": "static", "gamma": ["linear", 1.0], "eps": "x"}, r"`eps` must be a finite number"),
+    ],
+)
+def test_bad_specs_name_the_key(spec, message):
+    with pytest.raises(RuleSpecError, match=message):
+        SampledRule(spec, period=0.01)
+
+
+def test_fine_sampling_approaches_the_continuous_rule():
+    """On the robot arm (paper's x0, 30 s), the sampled rule at 1 ms sends within a few
+    transmissions of the continuous one; the event times are within a few samples."""
+    from etobs.runtime.packet import node_keys
+    from etobs.runtime.replay import replay, sample_outputs
+
+    pb = robot_arm()
+    cont = simulate(pb, [3, 2, 3, -2], 10.0)
+    t, y = sample_outputs(pb, [3, 2, 3, -2], 10.0, 0.001)
+    rep = replay(pb, node_keys(b"k", [0, 1]), t, y, 0.001)
+    counts = np.bincount(cont.transmissions.rule, minlength=2)
+    assert np.all(np.abs(np.array(rep.transmissions) - counts) <= 0.1 * counts + 2)
+    first = [min(p[2] for p in rep.packets if p[0] == i) for i in range(2)]
+    np.testing.assert_allclose(first, [cont.transmission_times(0, i)[0] for i in range(2)], atol=0.005)
+
+
+def test_rule_spec_refuses_what_a_node_cannot_run():
+    from etobs.errors import InputError
+    from etobs.model import Custom, GeneralizedRule, Linear, Quadratic, StaticRule
+
+    assert rule_spec(robot_arm().nodes[0].rule)["gamma"] == ["quadratic", 5.0]
+    with pytest.raises(
+        InputError, match=r"a sensor node runs DynamicRule, StaticRule, RelativeRule or PeriodicRule"
+    ):
+        rule_spec(GeneralizedRule(gamma=Quadratic(1.0), gamma_check=Quadratic(1.0)))
+    with pytest.raises(InputError, match=r"`gamma` is Custom"):
+        rule_spec(StaticRule(gamma=Custom(lambda s: s, name="id"), eps=1.0))
+    assert rule_spec(StaticRule(gamma=Linear(2.0), eps=1.0)) == {
+        "kind": "static",
+        "gamma": ["linear", 2.0],
+        "eps": 1.0,
+    }
