@@ -71,6 +71,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--rtol", type=float, default=1e-10, help="relative and absolute tolerance")
     p.add_argument("--no-plots", action="store_true", help="write summary.json only")
     p.set_defaults(func=run_robot_arm)
+    from etobs.cli.runtime import add_demo
+
+    add_demo(cases)
 
 
 def _atomic_write(path: Path, data: bytes) -> None:

@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from etobs import __version__
-from etobs.cli import check, compare, demo, sweep
+from etobs.cli import check, compare, demo, runtime, sweep
 from etobs.errors import EtobsError
 
 
@@ -22,6 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_parsers(sub)
     check.add_parser(sub)
     compare.add_parser(sub)
+    runtime.add_parsers(sub)
     return parser
 
 

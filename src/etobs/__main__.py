@@ -1,0 +1,7 @@
+"""``python -m etobs``: the command line."""
+
+import sys
+
+from etobs.cli.main import main
+
+sys.exit(main())
