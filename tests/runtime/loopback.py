@@ -74,8 +74,23 @@ class LossyLink:
         self._out.close()
 
 
-def live(problem, y, period, duration, *, time_scale, link=None, hostile=None, hold_back=0.05, trace=None):
-    """Run the server and one sensor thread per node on loopback; return (snapshot, server, extras)."""
+def live(
+    problem,
+    y,
+    period,
+    duration,
+    *,
+    time_scale,
+    link=None,
+    hostile=None,
+    hold_back=0.05,
+    trace=None,
+    broker=None,
+):
+    """Run the server and one sensor thread per node on loopback; return (snapshot, server, extras).
+
+    With ``broker = (host, port)`` the packets go through MQTT instead of UDP.
+    """
 
     async def main():
         core = ObserverCore(problem, KEYS)
@@ -85,9 +100,15 @@ def live(problem, y, period, duration, *, time_scale, link=None, hostile=None, h
         relay = LossyLink(port, **link) if link else None
         target = relay.port if relay else port
         sent, sockets = [], []
+        receiver = None
+        if broker is not None:
+            from etobs.runtime.mqtt import MqttReceiver, MqttSender
 
-        def sender():
-            udp = udp_sender("127.0.0.1", target)
+            receiver = MqttReceiver(*broker, "etobs/test", srv.feed)
+            time.sleep(0.2)  # let the subscription settle before the first packet
+
+        def sender(i=0):
+            udp = MqttSender(*broker, "etobs/test", i) if broker else udp_sender("127.0.0.1", target)
             sockets.append(udp)
 
             def send(data):
@@ -97,9 +118,10 @@ def live(problem, y, period, duration, *, time_scale, link=None, hostile=None, h
             return send
 
         nodes = [
-            SensorNode(i, KEYS[i], SampledRule(rule_spec(nd.rule), period), sender())
+            SensorNode(i, KEYS[i], SampledRule(rule_spec(nd.rule), period), sender(i))
             for i, nd in enumerate(problem.nodes)
         ]
+        srv.epoch = time.time() + 0.3  # once every sender is connected
         threads = [
             threading.Thread(
                 target=run,
@@ -125,6 +147,8 @@ def live(problem, y, period, duration, *, time_scale, link=None, hostile=None, h
             th.join(timeout=5)
         for udp in sockets:
             udp.close()
+        if receiver is not None:
+            receiver.close()
         if "hostile" in extra:
             extra["hostile"].join(timeout=5)
         extra["estimate"] = await _get(web)

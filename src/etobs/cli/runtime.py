@@ -99,15 +99,21 @@ def run_serve(args: argparse.Namespace) -> int:
         srv = ObserverServer(core, time_scale=dep.time_scale, hold_back=dep.hold_back, trace=args.trace)
         srv.epoch = time.time()  # replaced below once the endpoints are open
         udp, web = await srv.start(dep.host, dep.port, dep.http_port)
-        print(
-            f"etobs serve: UDP {dep.host}:{udp}" + (f", GET http://{dep.host}:{web}/estimate" if web else ""),
-            file=sys.stderr,
-            flush=True,
-        )
+        receiver = None
+        where = f"UDP {dep.host}:{udp}"
+        if dep.transport == "mqtt":
+            from etobs.runtime.mqtt import MqttReceiver
+
+            receiver = MqttReceiver(*dep.broker, dep.topic, srv.feed)
+            where += f" and MQTT {dep.broker[0]}:{dep.broker[1]} {dep.topic}/node/+"
+        web_note = f", GET http://{dep.host}:{web}/estimate" if web else ""
+        print(f"etobs serve: {where}{web_note}", file=sys.stderr, flush=True)
         srv.epoch = _epoch(args.epoch)
         try:
             return await srv.run_until(dep.duration)
         finally:
+            if receiver is not None:
+                receiver.close()
             await srv.close()
 
     print(json.dumps(asyncio.run(main())))
@@ -131,7 +137,13 @@ def run_sensor(args: argparse.Namespace) -> int:
     _, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
     outputs = list(pb.nodes[args.node].outputs)
     state = args.state or dep.secret_file.with_name(f"node{args.node}.seq")
-    with udp_sender(dep.host, dep.port) as send:
+    if dep.transport == "mqtt":
+        from etobs.runtime.mqtt import MqttSender
+
+        sender: Any = MqttSender(*dep.broker, dep.topic, args.node)
+    else:
+        sender = udp_sender(dep.host, dep.port)
+    with sender as send:
         node = SensorNode(
             args.node,
             derive_key(dep.secret(), args.node),

@@ -16,6 +16,9 @@ TOML (the packaged ``robot_arm`` is ``runtime/data/robot_arm_live.toml``)::
     dt = 0.001                     # observer integration step
     hold_back = 0.05               # observer runs this far behind the clock [s]
     secret_file = "etobs.secret"   # 32 random bytes; per-node keys derive from it
+    transport = "udp"              # or "mqtt" (extra `mqtt`), with:
+    broker = "127.0.0.1:1883"      # the MQTT broker
+    topic = "etobs/robot_arm_live" # nodes publish on <topic>/node/<i>
     [plant]                        # the simulated plant the sensors read (demo, tests)
     x0 = [3.0, 2.0, 3.0, -2.0]
 """
@@ -50,6 +53,9 @@ class Deployment:
     hold_back: float
     secret_file: Path
     x0: tuple[float, ...] | None
+    transport: str = "udp"
+    broker: tuple[str, int] = ("127.0.0.1", 1883)
+    topic: str = "etobs/deployment"
 
     def problem(self) -> EstimationProblem:
         """The estimation problem of ``[system]``."""
@@ -91,8 +97,30 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
         "runtime",
         top["runtime"],
         {"period", "duration"},
-        {"time_scale", "host", "port", "http_port", "dt", "hold_back", "secret_file"},
+        {
+            "time_scale",
+            "host",
+            "port",
+            "http_port",
+            "dt",
+            "hold_back",
+            "secret_file",
+            "transport",
+            "broker",
+            "topic",
+        },
     )
+    transport = rt.get("transport", "udp")
+    if transport not in ("udp", "mqtt"):
+        raise SpecError(f"`runtime.transport` must be 'udp' or 'mqtt'; got {transport!r}")
+    broker = rt.get("broker", "127.0.0.1:1883")
+    b_host, _, b_port = str(broker).rpartition(":")
+    if not b_host or not b_port.isdigit() or not 0 < int(b_port) <= 65535:
+        raise SpecError(f"`runtime.broker` must be 'host:port'; got {broker!r}")
+    name = str(top.get("name", "deployment"))
+    topic = rt.get("topic", f"etobs/{name}")
+    if not isinstance(topic, str) or not topic or any(c in topic for c in "+#"):
+        raise SpecError(f"`runtime.topic` must be a topic without wildcards; got {topic!r}")
     host = rt.get("host", "127.0.0.1")
     if not isinstance(host, str) or not host:
         raise SpecError(f"`runtime.host` must be a host name or address; got {host!r}")
@@ -114,7 +142,7 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
         x0 = tuple(float(_number(f"plant.x0[{i}]", v)) for i, v in enumerate(x0))
     secret_file = Path(rt.get("secret_file", "etobs.secret"))
     return Deployment(
-        name=str(top.get("name", "deployment")),
+        name=name,
         factory=system["factory"],
         params=dict(params),
         period=float(_number("runtime.period", rt["period"], lower=0.0, strict=True)),
@@ -127,4 +155,7 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
         hold_back=float(_number("runtime.hold_back", rt.get("hold_back", 0.05), lower=0.0)),
         secret_file=secret_file if secret_file.is_absolute() else base / secret_file,
         x0=x0,
+        transport=transport,
+        broker=(b_host, int(b_port)),
+        topic=topic,
     )

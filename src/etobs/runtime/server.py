@@ -67,7 +67,13 @@ class ObserverServer:
         self.tick, self.hold_back = tick, hold_back
         self.trace_path = None if trace is None else Path(trace)
         self._transport: asyncio.DatagramTransport | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._http: asyncio.Server | None = None
+
+    def feed(self, data: bytes) -> None:
+        """Hand a datagram to the observer from another thread (e.g. the MQTT client's)."""
+        assert self._loop is not None, "start() first"
+        self._loop.call_soon_threadsafe(self.core.receive, data)
 
     def now(self) -> float:
         """Service time."""
@@ -80,7 +86,7 @@ class ObserverServer:
         """Open the endpoints; return the UDP and HTTP ports (0 picks free ones)."""
         if self.epoch is None:
             self.epoch = time.time()
-        loop = asyncio.get_running_loop()
+        loop = self._loop = asyncio.get_running_loop()
         self._transport, _ = await loop.create_datagram_endpoint(
             lambda: _Datagrams(self), local_addr=(host, port)
         )

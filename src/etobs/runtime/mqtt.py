@@ -1,0 +1,80 @@
+"""MQTT transport (optional extra ``mqtt``: paho-mqtt), for deployments with a broker.
+
+Node ``i`` publishes each packet, unchanged (the packet carries its own authentication),
+on ``<topic>/node/<i>`` with QoS 0; the observer subscribes to ``<topic>/node/+``. The
+broker is not trusted: a packet it alters, replays or invents is rejected by the
+observer like any other (:mod:`etobs.runtime.packet`). The sensor core stays on the
+standard library; only this transport needs paho-mqtt.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+
+def _paho() -> Any:
+    try:
+        import paho.mqtt.client as mqtt
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("the MQTT transport needs paho-mqtt: pip install 'etobs[mqtt]'") from exc
+    return mqtt
+
+
+def _connect(client: Any, host: str, port: int, timeout: float) -> None:
+    import threading
+
+    ready = threading.Event()
+    client.on_connect = lambda c, u, flags, reason, props: ready.set()
+    client.connect(host, port, keepalive=30)
+    client.loop_start()
+    if not ready.wait(timeout):
+        client.loop_stop()
+        raise ConnectionError(f"no answer from the MQTT broker at {host}:{port} within {timeout:g} s")
+
+
+class MqttSender:
+    """Publish node ``node``'s packets on ``<topic>/node/<node>``; ``close()`` when done."""
+
+    def __init__(self, host: str, port: int, topic: str, node: int, *, timeout: float = 10.0) -> None:
+        mqtt = _paho()
+        self.topic = f"{topic}/node/{node}"
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=f"etobs-node-{node}")
+        _connect(self.client, host, port, timeout)
+
+    def __call__(self, data: bytes) -> None:
+        self.client.publish(self.topic, data, qos=0)
+
+    def close(self) -> None:
+        self.client.loop_stop()
+        self.client.disconnect()
+
+    def __enter__(self) -> MqttSender:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class MqttReceiver:
+    """Subscribe to every node's topic and hand each payload to ``deliver`` (from paho's thread)."""
+
+    def __init__(
+        self, host: str, port: int, topic: str, deliver: Callable[[bytes], object], *, timeout: float = 10.0
+    ) -> None:
+        mqtt = _paho()
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="etobs-observer")
+        import threading
+
+        self.client.on_message = lambda c, u, msg: deliver(bytes(msg.payload))
+        acked = threading.Event()
+        self.client.on_subscribe = lambda c, u, mid, codes, props: acked.set()
+        _connect(self.client, host, port, timeout)
+        self.client.subscribe(f"{topic}/node/+", qos=0)
+        if not acked.wait(timeout):  # packets published before the broker's answer would be lost
+            self.close()
+            raise ConnectionError(f"the MQTT broker at {host}:{port} did not confirm the subscription")
+
+    def close(self) -> None:
+        self.client.loop_stop()
+        self.client.disconnect()
