@@ -39,6 +39,7 @@ def test_demo_live_matches_its_reference(tmp_path, capsys):
     assert s["transmissions_live"] == s["transmissions_reference"] == s["transmissions_sensors"]
     assert s["final_gap"] < 1e-4 and s["late"] == 0
     assert "transmissions per node: live" in out and (tmp_path / "trace.jsonl").is_file()
+    assert (tmp_path / "trace.png").stat().st_size > 10_000
     assert oct((tmp_path / "etobs.secret").stat().st_mode & 0o777) == "0o600"
 
 

@@ -264,6 +264,13 @@ def run_demo_live(args: argparse.Namespace) -> int:
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     tr = read_trace(out / "trace.jsonl")
+    try:
+        from etobs.plot import plot_trace
+
+        fig, _ = plot_trace(tr, ref)
+        fig.savefig(out / "trace.png", dpi=110)
+    except ImportError:  # pragma: no cover - matplotlib is the optional extra `plot`
+        pass
     print(f"transmissions per node: live {snap['transmissions']}, reference {list(ref.transmissions)}")
     print(
         f"final estimate: live {np.round(snap['xhat'], 4).tolist()}, reference "
