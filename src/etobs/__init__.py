@@ -98,7 +98,15 @@ if TYPE_CHECKING:
     )
 
 
+#: Subpackages reachable as attributes (``etobs.model``), imported on first use.
+_SUBPACKAGES = frozenset(
+    {"cli", "design", "estimation", "examples", "experiments", "hybrid", "model", "plot", "runtime"}
+)
+
+
 def __getattr__(name: str) -> Any:
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"etobs.{name}")
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'etobs' has no attribute {name!r}")

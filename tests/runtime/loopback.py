@@ -142,7 +142,10 @@ def live(
         if hostile is not None:
             extra["hostile"] = threading.Thread(target=hostile, args=(port, sent, srv.epoch), daemon=True)
             extra["hostile"].start()
-        snap = await asyncio.wait_for(srv.run_until(duration), timeout=60 + duration / time_scale)
+        finished = lambda: not any(th.is_alive() for th in threads)  # noqa: E731
+        snap = await asyncio.wait_for(
+            srv.run_until(duration, finished=finished), timeout=60 + duration / time_scale
+        )
         for th in threads:
             th.join(timeout=5)
         for udp in sockets:

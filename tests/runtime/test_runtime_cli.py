@@ -44,14 +44,16 @@ def test_demo_live_matches_its_reference(tmp_path, capsys):
 
 
 def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
-    """A sensor process is killed mid-run (SIGKILL) and started again with the same
-    state file: every packet of both runs is accepted, none is stale or replayed."""
+    """A sensor process is killed (SIGKILL) after it has sent packets and started again
+    with the same state file and epoch: it joins at the current time, every packet of
+    both runs is accepted, none is stale or replayed, sequence numbers keep increasing."""
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     rx.settimeout(0.2)
     spec = tmp_path / "deploy.toml"
-    spec.write_text(SPEC.format(duration=60.0, scale=20.0, port=rx.getsockname()[1]))
+    spec.write_text(SPEC.format(duration=120.0, scale=4.0, port=rx.getsockname()[1]))
     (tmp_path / "secret.key").write_bytes(os.urandom(32))
+    epoch = repr(time.time())
     cmd = [
         sys.executable,
         "-m",
@@ -60,35 +62,37 @@ def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
         str(spec),
         "--node",
         "0",
+        "--epoch",
+        epoch,
         "--state",
         str(tmp_path / "n0.seq"),
     ]
     got = []
 
-    def collect(seconds):
+    def collect(until_count, seconds):
         end = time.time() + seconds
-        while time.time() < end:
+        while time.time() < end and len(got) < until_count:
             try:
                 got.append(rx.recv(4096))
             except TimeoutError:
                 pass
 
-    first = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    collect(8.0)
-    first.send_signal(signal.SIGKILL)
-    first.wait(timeout=10)
-    n_first = len(got)
-    second = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    collect(8.0)
-    second.send_signal(signal.SIGKILL)
-    second.wait(timeout=10)
+    for run in range(2):
+        before = len(got)
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        collect(before + 6, 60.0)  # bounded: 60 s at most, 6 packets per run
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        assert len(got) >= before + 6, f"run {run}: only {len(got) - before} packets"
     rx.close()
-    assert n_first > 3 and len(got) > n_first + 3
     core = ObserverCore(linear.factory(), node_keys((tmp_path / "secret.key").read_bytes(), [0]))
     verdicts = [core.receive(d) for d in got]
     assert verdicts.count("initial") == 2 and set(verdicts) <= {"initial", "applied"}
     seqs = [struct.unpack(">Q", d[8:16])[0] for d in got]
+    times = [struct.unpack(">d", d[16:24])[0] for d in got]
     assert seqs == sorted(set(seqs))
+    second = verdicts.index("initial", 1)
+    assert times[second] > times[second - 1]  # the restarted node joined at the current time
 
 
 def test_runtime_spec_errors(tmp_path):
@@ -98,8 +102,12 @@ def test_runtime_spec_errors(tmp_path):
         main(["serve", str(spec)])
     assert e.value.code == 2
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0))
-    with pytest.raises(SystemExit):
-        main(["sensor", str(spec), "--node", "0"])  # no secret yet
+    with pytest.raises(SystemExit) as e:
+        main(["sensor", str(spec), "--node", "0"])  # no --epoch: argparse names it
+    assert e.value.code == 2
+    with pytest.raises(SystemExit) as e:
+        main(["sensor", str(spec), "--node", "0", "--epoch", "nan"])
+    assert e.value.code == 2
 
 
 @pytest.mark.parametrize(

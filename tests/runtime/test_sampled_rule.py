@@ -59,7 +59,9 @@ def test_decision_and_jump_follow_eq_14_15():
 def test_periodic_static_relative():
     per = SampledRule({"kind": "periodic", "period": 0.05, "first": 0.05}, period=0.01)
     fired = [per.decide([0.0], [0.0]) for _ in range(20)]
-    assert [k for k, f in enumerate(fired) if f] == [4, 9, 14, 19]
+    assert [k for k, f in enumerate(fired) if f] == [5, 10, 15]  # t = 0.05, 0.10, 0.15 as PeriodicRule
+    at_zero = SampledRule({"kind": "periodic", "period": 0.05, "first": 0.0}, period=0.01)
+    assert [k for k in range(12) if at_zero.decide([0.0], [0.0])] == [0, 5, 10]
     sta = SampledRule({"kind": "static", "gamma": ["linear", 1.0], "eps": 0.1}, period=0.01)
     assert sta.decide([0.1], [0.0]) and not sta.decide([0.0999], [0.0])
     rel = SampledRule({"kind": "relative", "rho": 0.1, "eps": 0.01}, period=0.01)

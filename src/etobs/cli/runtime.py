@@ -2,9 +2,11 @@
 
 ``serve SPEC`` runs the observer service until the spec's duration and prints its final
 estimate and counters (JSON); ``sensor SPEC --node i`` runs node ``i`` on the spec's
-simulated plant. Both share a clock: service time 0 is ``--epoch`` (a ``time.time()``
-value), or, with ``--epoch -``, a line read from standard input (how ``demo live``
-starts every process at once after they are ready). ``demo live`` starts the service
+simulated plant. They share a clock: time 0 is the epoch, a ``time.time()`` value.
+``serve`` takes ``--epoch`` or uses its start and prints it; every ``sensor`` must be
+given the same ``--epoch`` (a sensor started or restarted later joins at the current
+time). ``--epoch -`` reads it from standard input (how ``demo live`` starts every
+process at once after they are ready). ``demo live`` starts the service
 in this process and one sensor process per node on 127.0.0.1, then compares the live
 run with the offline reference (same sensors and observer, no network).
 """
@@ -47,7 +49,11 @@ def add_parsers(sub: Any) -> None:
     s = sub.add_parser("sensor", help="run one sensor node on the spec's simulated plant")
     s.add_argument("spec", metavar="SPEC", help=f"deployment TOML, or a packaged one: {', '.join(PACKAGED)}")
     s.add_argument("--node", type=int, required=True, help="node index (0-based)")
-    s.add_argument("--epoch", default=None, help="time.time() of time 0, or '-' to read it from stdin")
+    s.add_argument(
+        "--epoch",
+        required=True,
+        help="the service's epoch (printed by etobs serve), or '-' to read it from stdin",
+    )
     s.add_argument(
         "--state", type=Path, default=None, help="sequence-number file (default NODE.seq next to the secret)"
     )
@@ -79,9 +85,12 @@ def _epoch(value: str | None) -> float:
     if value == "-":
         value = sys.stdin.readline().strip()
     try:
-        return float(value)
-    except ValueError as exc:
-        raise InputError(f"--epoch must be a time.time() value or '-'; got {value!r}") from exc
+        epoch = float(value)
+    except ValueError:
+        epoch = float("nan")
+    if not np.isfinite(epoch) or epoch <= 0:
+        raise InputError(f"--epoch must be a time.time() value (seconds since 1970) or '-'; got {value!r}")
+    return epoch
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -100,16 +109,21 @@ def run_serve(args: argparse.Namespace) -> int:
         srv.epoch = time.time()  # replaced below once the endpoints are open
         udp, web = await srv.start(dep.host, dep.port, dep.http_port)
         receiver = None
-        where = f"UDP {dep.host}:{udp}"
-        if dep.transport == "mqtt":
-            from etobs.runtime.mqtt import MqttReceiver
-
-            receiver = MqttReceiver(*dep.broker, dep.topic, srv.feed)
-            where += f" and MQTT {dep.broker[0]}:{dep.broker[1]} {dep.topic}/node/+"
-        web_note = f", GET http://{dep.host}:{web}/estimate" if web else ""
-        print(f"etobs serve: {where}{web_note}", file=sys.stderr, flush=True)
-        srv.epoch = _epoch(args.epoch)
         try:
+            where = f"UDP {dep.host}:{udp}"
+            if dep.transport == "mqtt":
+                from etobs.runtime.mqtt import MqttReceiver
+
+                receiver = MqttReceiver(*dep.broker, dep.topic, srv.feed)
+                where += f" and MQTT {dep.broker[0]}:{dep.broker[1]} {dep.topic}/node/+"
+            web_note = f", GET http://{dep.host}:{web}/estimate" if web else ""
+            print(f"etobs serve: {where}{web_note}", file=sys.stderr, flush=True)
+            srv.epoch = await asyncio.to_thread(_epoch, args.epoch)  # stdin is read off the event loop
+            print(
+                f"etobs serve: epoch {srv.epoch!r} (give it to every sensor: --epoch)",
+                file=sys.stderr,
+                flush=True,
+            )
             return await srv.run_until(dep.duration)
         finally:
             if receiver is not None:
@@ -233,11 +247,19 @@ def run_demo_live(args: argparse.Namespace) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-            snap = await srv.run_until(dep.duration)
+            # the observer waits for the sensors' last packets (they exit after their last sample)
+            snap = await srv.run_until(
+                dep.duration, finished=lambda: all(p.poll() is not None for p in procs)
+            )
             reports = []
-            for p in procs:
+            for i, p in enumerate(procs):
                 stdout, _ = await asyncio.to_thread(p.communicate, timeout=60)
-                reports.append(json.loads(stdout.strip().splitlines()[-1]))
+                lines = stdout.strip().splitlines()
+                if p.returncode != 0 or not lines:
+                    raise InputError(
+                        f"sensor process of node {i} failed (exit {p.returncode}); its run is incomplete"
+                    )
+                reports.append(json.loads(lines[-1]))
             return snap, reports
         finally:
             for p in procs:

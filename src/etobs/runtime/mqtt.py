@@ -21,11 +21,24 @@ def _paho() -> Any:
     return mqtt
 
 
-def _connect(client: Any, host: str, port: int, timeout: float) -> None:
+def _client_id(role: str) -> str:
+    import uuid
+
+    return f"etobs-{role}-{uuid.uuid4().hex[:12]}"  # unique: a duplicate id would knock us off
+
+
+def _connect(
+    client: Any, host: str, port: int, timeout: float, on_connect: Callable[[], object] = lambda: None
+) -> None:
     import threading
 
     ready = threading.Event()
-    client.on_connect = lambda c, u, flags, reason, props: ready.set()
+
+    def connected(c: Any, u: Any, flags: Any, reason: Any, props: Any) -> None:
+        on_connect()  # also after an automatic reconnect
+        ready.set()
+
+    client.on_connect = connected
     client.connect(host, port, keepalive=30)
     client.loop_start()
     if not ready.wait(timeout):
@@ -39,7 +52,7 @@ class MqttSender:
     def __init__(self, host: str, port: int, topic: str, node: int, *, timeout: float = 10.0) -> None:
         mqtt = _paho()
         self.topic = f"{topic}/node/{node}"
-        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=f"etobs-node-{node}")
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=_client_id(f"node{node}"))
         _connect(self.client, host, port, timeout)
 
     def __call__(self, data: bytes) -> None:
@@ -63,14 +76,14 @@ class MqttReceiver:
         self, host: str, port: int, topic: str, deliver: Callable[[bytes], object], *, timeout: float = 10.0
     ) -> None:
         mqtt = _paho()
-        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="etobs-observer")
         import threading
 
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=_client_id("observer"))
         self.client.on_message = lambda c, u, msg: deliver(bytes(msg.payload))
         acked = threading.Event()
         self.client.on_subscribe = lambda c, u, mid, codes, props: acked.set()
-        _connect(self.client, host, port, timeout)
-        self.client.subscribe(f"{topic}/node/+", qos=0)
+        # subscribe on every (re)connect: a broker does not keep a clean session's subscriptions
+        _connect(self.client, host, port, timeout, lambda: self.client.subscribe(f"{topic}/node/+", qos=0))
         if not acked.wait(timeout):  # packets published before the broker's answer would be lost
             self.close()
             raise ConnectionError(f"the MQTT broker at {host}:{port} did not confirm the subscription")

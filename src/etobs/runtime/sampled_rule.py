@@ -112,7 +112,8 @@ class SampledRule:
                     f"{self.period:g}; got {spec['period']!r}"
                 )
             first = _number(spec, "first") if "first" in spec else float(spec["period"])
-            self.count = self.every - max(0, round(first / self.period))
+            # fire at the sample of time `first`, then every `every` samples (as PeriodicRule)
+            self.count = self.every - round(first / self.period) - 1
         else:
             raise RuleSpecError(
                 f"rule spec: `kind` must be dynamic, static, periodic or relative; got {self.kind!r}"

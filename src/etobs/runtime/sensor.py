@@ -15,6 +15,7 @@ blocks of them in a file before using them.
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 import time
@@ -150,14 +151,16 @@ def run(
     epoch: float | None = None,
     time_scale: float = 1.0,
 ) -> int:
-    """Sample at ``t_k = k period`` for ``0 <= t_k <= duration``; return the samples taken.
+    """Sample at ``t_k = k period`` for ``t_k <= duration``; return the samples taken.
 
     Node time runs ``time_scale`` times faster than the wall clock from ``epoch`` (a
-    ``time.time()`` value; default now), so a test can run a minute of plant time in a
-    second. A sample that falls behind the clock is taken at once (never skipped).
+    ``time.time()`` value shared with the service; default now), so a test can run a
+    minute of plant time in a second. A node started after the epoch (e.g. restarted)
+    begins at the first sample not yet due; a sample that then falls behind the clock is
+    taken at once (never skipped).
     """
     start = time.time() if epoch is None else epoch
-    k = 0
+    k = max(0, math.ceil((time.time() - start) * time_scale / period - 1e-9))
     while k * period <= duration + 1e-12:
         t = k * period
         wait = start + t / time_scale - time.time()

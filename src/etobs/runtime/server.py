@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ class _Datagrams(asyncio.DatagramProtocol):
         self.server = server
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
-        self.server.core.receive(data)
+        self.server.core.receive(data, self.server.now())
 
 
 class ObserverServer:
@@ -73,7 +74,7 @@ class ObserverServer:
     def feed(self, data: bytes) -> None:
         """Hand a datagram to the observer from another thread (e.g. the MQTT client's)."""
         assert self._loop is not None, "start() first"
-        self._loop.call_soon_threadsafe(self.core.receive, data)
+        self._loop.call_soon_threadsafe(lambda: self.core.receive(data, self.now()))
 
     def now(self) -> float:
         """Service time."""
@@ -97,14 +98,26 @@ class ObserverServer:
             web = self._http.sockets[0].getsockname()[1]
         return udp, web
 
-    async def run_until(self, t_end: float) -> dict[str, Any]:
-        """Tick until service time ``t_end``, then advance to it; return the final snapshot."""
+    async def run_until(
+        self, t_end: float, *, finished: Callable[[], bool] | None = None, linger: float = 30.0
+    ) -> dict[str, Any]:
+        """Tick until service time ``t_end``; return the final snapshot.
+
+        With ``finished`` (e.g. "every sensor process has exited"), the observer stays
+        ``hold_back`` short of ``t_end`` until it returns True, so that the senders' last
+        packets are applied at their sample times; after ``linger`` wall seconds past
+        ``t_end`` it stops anyway.
+        """
+        assert self.epoch is not None, "start() first"
         fh = open(self.trace_path, "w") if self.trace_path is not None else None
+        give_up = self.epoch + t_end / self.time_scale + linger
         try:
             next_tick = 0.0
             while True:
-                now = self.now()
-                target = min(now - self.hold_back, t_end)
+                done = finished is None or finished() or time.time() > give_up
+                target = min(self.now() - self.hold_back, t_end if done else t_end - self.hold_back)
+                if done and self.now() >= t_end:
+                    target = t_end
                 self.core.advance(target)
                 if fh is not None and (target >= next_tick or target >= t_end):  # the end always
                     fh.write(json.dumps(self.core.snapshot()) + "\n")
@@ -138,7 +151,7 @@ class ObserverServer:
             )
             writer.write(head.encode() + body)
             await writer.drain()
-        except (TimeoutError, ConnectionError, UnicodeDecodeError):
+        except (TimeoutError, ConnectionError, UnicodeDecodeError, ValueError):  # ValueError: line too long
             pass
         finally:
             writer.close()

@@ -5,11 +5,14 @@ node, the last sequence number applied and a window of recent ones. It integrate
 ``z' = f_o(t, z, u, ybar, yhat)`` (eq. (7)) with classical Runge--Kutta steps of at most
 ``dt`` between events. A packet is checked (:func:`~etobs.runtime.packet.decode`), then:
 
-* ``replayed`` if its sequence number was already applied (a copy);
-* ``stale`` if it is older than the last one applied (overtaken);
-* otherwise applied: the observer integrates up to the packet's sample time when that
-  is ahead of it (so it applies the value when it was measured), or applies it at once
-  when it arrives late (counted in ``late``), and holds the new values.
+* ``replayed`` if its sequence number was already accepted (a copy);
+* ``stale`` if it is older than the last one accepted (overtaken);
+* ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
+  (a wrong clock or epoch; accepting it would stall the observer);
+* otherwise accepted. A packet whose sample time is still ahead of the observer waits
+  in a queue and is applied when the observer reaches that time, in time order across
+  nodes (so it acts from when it was measured); one that arrives after the observer
+  passed its time is applied at once and counted in ``late``.
 
 Every rejection is counted by kind; nothing raises. The asyncio transports
 (:mod:`etobs.runtime.server`) feed it.
@@ -17,6 +20,7 @@ Every rejection is counted by kind; nothing raises. The asyncio transports
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -28,7 +32,7 @@ from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.runtime.packet import Packet, PacketError, decode
 
-VERDICTS = ("applied", "initial", "replayed", "stale", "malformed", "forged", "wrong_size")
+VERDICTS = ("applied", "initial", "replayed", "stale", "future", "malformed", "forged", "wrong_size")
 
 
 @dataclass
@@ -56,6 +60,9 @@ class ObserverCore:
         Start time.
     dt : float
         Largest integration step.
+    max_lead : float
+        Packets stamped more than this ahead of the clock given to :meth:`receive` are
+        rejected as ``future``.
 
     """
 
@@ -67,6 +74,7 @@ class ObserverCore:
         z0: Any = None,
         t0: float = 0.0,
         dt: float = 1e-3,
+        max_lead: float = 1.0,
     ) -> None:
         if not isinstance(problem, EstimationProblem):
             raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
@@ -86,6 +94,8 @@ class ObserverCore:
         self.ybar = np.full(problem.plant.n_y, np.nan)
         self.nodes = {i: NodeState(outputs=np.array(nd.outputs)) for i, nd in enumerate(problem.nodes)}
         self.counts = dict.fromkeys(VERDICTS, 0)
+        self.max_lead = float(max_lead)
+        self._queue: list[tuple[float, int, int, Packet]] = []  # (t, node, seq, packet)
         self.late = 0
         self.max_lateness = 0.0
 
@@ -105,7 +115,14 @@ class ObserverCore:
         return pb.observer.f_o(tt, z[None], pb.u(tt), self.ybar[None], yhat)[0]
 
     def advance(self, t: float) -> None:
-        """Integrate the observer to time ``t`` (no-op if ``t`` is not ahead)."""
+        """Integrate the observer to time ``t``, applying the queued packets on the way."""
+        while self._queue and self._queue[0][0] <= t:
+            tk, _, _, p = heapq.heappop(self._queue)
+            self._integrate(tk)
+            self._hold(p)
+        self._integrate(t)
+
+    def _integrate(self, t: float) -> None:
         if t <= self.t:
             return
         if not self.ready:  # nothing to run on yet: the observer waits at its initial state
@@ -113,7 +130,7 @@ class ObserverCore:
             return
         n = max(1, int(np.ceil((t - self.t) / self.dt - 1e-9)))
         h = (t - self.t) / n
-        z, s = self.z, self.t
+        z = self.z
         for k in range(n):
             s = self.t + k * h
             k1 = self._f(s, z)
@@ -123,8 +140,11 @@ class ObserverCore:
             z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         self.z, self.t = z, t
 
-    def receive(self, data: bytes) -> str:
-        """Check and apply one datagram; return the verdict (one of :data:`VERDICTS`)."""
+    def receive(self, data: bytes, now: float | None = None) -> str:
+        """Check and accept one datagram; return the verdict (one of :data:`VERDICTS`).
+
+        ``now`` is the service clock (``None``: no clock, as in an offline replay).
+        """
         try:
             p = decode(data, self.keys)
         except PacketError as exc:
@@ -138,20 +158,23 @@ class ObserverCore:
             return self._count("replayed")
         if p.seq <= node.last_seq:
             return self._count("stale")
-        self._apply(node, p)
-        return self._count("initial" if p.initial else "applied")
-
-    def _apply(self, node: NodeState, p: Packet) -> None:
-        if p.t >= self.t:
-            self.advance(p.t)
-        else:
-            self.late += 1
-            self.max_lateness = max(self.max_lateness, self.t - p.t)
-        self.ybar[node.outputs] = p.values  # eq. (5): ybar_i+ = y_i(t_k)
+        if now is not None and p.t > now + self.max_lead:
+            return self._count("future")
         node.last_seq = p.seq
         node.recent.append(p.seq)
         if not p.initial:
             node.transmissions += 1
+        if p.t > self.t:
+            heapq.heappush(self._queue, (p.t, p.node, p.seq, p))
+        else:
+            if p.t < self.t:
+                self.late += 1
+                self.max_lateness = max(self.max_lateness, self.t - p.t)
+            self._hold(p)
+        return self._count("initial" if p.initial else "applied")
+
+    def _hold(self, p: Packet) -> None:
+        self.ybar[self.nodes[p.node].outputs] = p.values  # eq. (5): ybar_i+ = y_i(t_k)
 
     def _count(self, verdict: str) -> str:
         self.counts[verdict] += 1
