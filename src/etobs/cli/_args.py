@@ -8,7 +8,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from etobs.experiments.spec import SpecError
+from etobs._spec import SpecError
 
 
 def positive_int(text: str) -> int:

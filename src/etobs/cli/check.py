@@ -36,9 +36,11 @@ from typing import Any
 
 import numpy as np
 
+from etobs._spec import SpecError
+from etobs._spec import keys as _keys
+from etobs._spec import number as _number
 from etobs.cli._args import load_toml
-from etobs.experiments.spec import SpecError, _keys, _number
-from etobs.experiments.systems import resolve_factory
+from etobs.examples.registry import resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
 

@@ -22,9 +22,9 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.estimation import max_estimation_error, min_inter_event_time, simulate, transmission_counts
 from etobs.estimation.result import EstimationResult
+from etobs.examples.registry import resolve_factory
 from etobs.experiments.compare_spec import CompareSpec, NetworkEntry, RuleEntry
 from etobs.experiments.spec import SpecError
-from etobs.experiments.systems import resolve_factory
 from etobs.hybrid.options import SaveAt
 
 

@@ -52,14 +52,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
+from etobs._spec import SpecError
+from etobs._spec import keys as _keys
+from etobs._spec import number as _number
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.spec import (
     InitialStates,
     Metrics,
-    SpecError,
-    _keys,
-    _number,
     parse_initial_states,
     parse_metrics,
     parse_solver,

@@ -41,6 +41,9 @@ from typing import Any
 
 import numpy as np
 
+from etobs._spec import SpecError
+from etobs._spec import keys as _keys
+from etobs._spec import number as _number
 from etobs.errors import InputError
 from etobs.hybrid.options import SolverOptions
 
@@ -56,39 +59,6 @@ _SOLVER_KEYS = {
     "event_samples",
     "event_xtol",
 }
-
-
-class SpecError(InputError):
-    """A sweep spec is invalid; the message names the offending key."""
-
-
-def _keys(where: str, table: Any, required: set[str], optional: set[str]) -> dict[str, Any]:
-    if not isinstance(table, dict):
-        raise SpecError(f"`{where}` must be a table; got {type(table).__name__}")
-    unknown = sorted(set(table) - required - optional)
-    if unknown:
-        allowed = ", ".join(sorted(required | optional))
-        raise SpecError(f"unknown key `{where}.{unknown[0]}`; allowed keys of `{where}`: {allowed}")
-    missing = sorted(required - set(table))
-    if missing:
-        raise SpecError(f"missing key `{where}.{missing[0]}`")
-    return table
-
-
-def _number(
-    key: str, value: Any, *, lower: float | None = None, integer: bool = False, strict: bool = False
-) -> float:
-    if isinstance(value, np.generic):
-        value = value.item()
-    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
-    if isinstance(value, bool) or not ok:
-        kind = "an integer" if integer else "a number"
-        raise SpecError(f"`{key}` must be {kind}; got {value!r}")
-    if not np.isfinite(value):
-        raise SpecError(f"`{key}` must be finite; got {value!r}")
-    if lower is not None and (value < lower or (strict and value == lower)):
-        raise SpecError(f"`{key}` must be {'>' if strict else '>='} {lower:g}; got {value!r}")
-    return value
 
 
 def _pair(key: str, value: Any) -> tuple[float, float]:

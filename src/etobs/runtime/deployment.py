@@ -31,9 +31,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from etobs._spec import SpecError
+from etobs._spec import keys as _keys
+from etobs._spec import number as _number
 from etobs.estimation.problem import EstimationProblem
-from etobs.experiments.spec import SpecError, _keys, _number
-from etobs.experiments.systems import resolve_factory
+from etobs.examples.registry import resolve_factory
 
 
 @dataclass(frozen=True)
