@@ -75,6 +75,13 @@ def solve_reference(
 
 
 class _Run:
+    """One run of the reference backend.
+
+    The system is batched; ``solve_ivp`` works on one state of shape ``(n,)``. The
+    batch-of-one wrappers around ``flow`` and ``guard`` and the ``m`` event functions
+    are built here once per run, not once per segment or per call.
+    """
+
     def __init__(
         self,
         system: HybridSystem,
@@ -88,13 +95,54 @@ class _Run:
         self.sys, self.b, self.opts, self.rec = system, np.array([b]), opts, rec
         self.t, self.x, self.j, self.t_end = t0, x0.copy(), 0, t_end
         self.n_steps = 0
+        self.g_start = np.empty(0)
+        self.theta = np.arange(1, opts.event_samples + 1) / opts.event_samples
+        # The last point the guard was evaluated at, as (t, x, g): solve_ivp calls its
+        # m event functions one by one at the same (t, y), and once more at the start
+        # of a segment where jumps() has just evaluated the guard. The key is the
+        # identity of x (held here, so it cannot be recycled) and the value of t.
+        self.last: tuple[Any, Any, Any] = (None, None, None)
+        # Guard values along the dense output of the current segment, by time:
+        # locate() and brentq evaluate the bracket ends more than once.
+        self.on_dense: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        flow = system.flow
 
-    def g(self, t: float | np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Event functions at one time (x: (n,)) or many (x: (K, n)); returns (m,) or (K, m)."""
-        tt = np.atleast_1d(np.asarray(t, dtype=float))
-        xx = np.atleast_2d(x)
-        out = np.asarray(self.sys.guard(tt, xx), dtype=float)
-        return out[0] if np.ndim(x) == 1 else out
+        def fun(t: float, x: np.ndarray) -> Any:
+            # solve_ivp converts the result with np.asarray(..., dtype=float) itself
+            return flow(np.array((t,)), x[None])[0]
+
+        self.fun = fun
+        self.events = [self._event(k) for k in range(system.n_rules)] or None
+
+    def _event(self, k: int) -> Any:
+        def ev(t: float, x: np.ndarray) -> float:
+            return self.g1(t, x)[k]
+
+        ev.terminal = True  # type: ignore[attr-defined]
+        ev.direction = 1.0  # type: ignore[attr-defined]
+        return ev
+
+    def g1(self, t: float, x: np.ndarray) -> np.ndarray:
+        """Event functions at one point, x (n,) -> (m,)."""
+        last_t, last_x, last_g = self.last
+        if x is last_x and t == last_t:
+            return last_g
+        # a copy: the values are remembered, whatever the guard does with its output
+        g = np.array(self.sys.guard(np.array((t,)), x[None]), dtype=float)[0]
+        self.last = (t, x, g)
+        return g
+
+    def gk(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Event functions at many points, t (K,), x (K, n) -> (K, m)."""
+        return np.asarray(self.sys.guard(t, x), dtype=float)
+
+    def at(self, dense: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """State and event functions at ``t`` on the dense output of this segment."""
+        hit = self.on_dense.get(t)
+        if hit is None:
+            x = dense(t)
+            hit = self.on_dense[t] = (x, self.g1(t, x))
+        return hit
 
     def keep(self, t: float, x: np.ndarray) -> None:
         self.rec.steps(self.b, np.array([t]), np.array([self.j]), x[None])
@@ -113,8 +161,10 @@ class _Run:
     def jumps(self) -> Status:
         """Apply jumps until every event function is negative."""
         while True:
-            fire = np.flatnonzero(self.g(self.t, self.x) >= 0)
+            g = self.g1(self.t, self.x)
+            fire = np.flatnonzero(g >= 0)
             if fire.size == 0:
+                self.g_start = g
                 return Status.RUNNING
             for k in fire:
                 if self.j >= self.opts.max_jumps:
@@ -129,30 +179,17 @@ class _Run:
 
     def segment(self) -> Status:
         """Flow from the current state to the next event (or the end), then jump."""
-        o, sys_, m = self.opts, self.sys, self.sys.n_rules
-
-        def fun(t: float, x: np.ndarray) -> np.ndarray:
-            return np.asarray(sys_.flow(np.array([t]), x[None]), dtype=float)[0]
-
-        events = []
-        for k in range(m):
-
-            def ev(t: float, x: np.ndarray, k: int = k) -> float:
-                return float(self.g(t, x)[k])
-
-            ev.terminal = True  # type: ignore[attr-defined]
-            ev.direction = 1.0  # type: ignore[attr-defined]
-            events.append(ev)
+        o = self.opts
         first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
         sol = solve_ivp(
-            fun,
+            self.fun,
             (self.t, self.t_end),
             self.x,
             method="DOP853",
             rtol=o.rtol,
             atol=o.atol,
             max_step=o.max_step,
-            events=events or None,
+            events=self.events,
             dense_output=True,
             **first,
         )
@@ -161,31 +198,37 @@ class _Run:
             # Report where the integration actually stopped, like the fast solver.
             self.t, self.x = float(sol.t[-1]), np.asarray(sol.y[:, -1], dtype=float)
             self.keep(self.t, self.x)
-            finite = np.all(np.isfinite(self.x)) and np.all(np.isfinite(fun(self.t, self.x)))
+            dx = np.asarray(self.fun(self.t, self.x), dtype=float)
+            finite = np.all(np.isfinite(self.x)) and np.all(np.isfinite(dx))
             return Status.STEP_UNDERFLOW if finite else Status.NONFINITE
         dense = sol.sol
+        self.on_dense = {}
         t_stop, bracket = float(sol.t[-1]), None
         if sol.status == 1:
             t_hit = min(float(te[0]) for te in sol.t_events if te.size)
             bracket = (float(sol.t[-2]) if sol.t.size > 1 else self.t, t_hit)
         # Guard: sample every step (and probe predicted peaks); an earlier crossing
         # overrides solve_ivp's event.
-        if m:
-            early = self.scan(dense, float(self.t))
+        if self.events:
+            early = self.scan(dense, float(self.t), self.g_start)
             if early is not None and (bracket is None or early[1] < bracket[1]):
                 bracket = early
         if bracket is not None:
             t_stop = self.locate(dense, *bracket)
-        x_stop = dense(t_stop) if t_stop < float(sol.t[-1]) or bracket is not None else sol.y[:, -1]
-        keep_t = sol.t[1:][sol.t[1:] < t_stop]
-        for tk, xk in zip(keep_t, sol.y[:, 1:][:, : keep_t.size].T, strict=True):
-            self.keep(float(tk), xk)
+            x_stop = np.asarray(self.at(dense, t_stop)[0], dtype=float)
+        else:
+            x_stop = np.asarray(sol.y[:, -1], dtype=float)
+        if self.rec.keep_steps:
+            # every step end before t_stop, then t_stop itself, in one chunk
+            t_keep = np.append(sol.t[1:][sol.t[1:] < t_stop], t_stop)
+            n_keep = t_keep.size
+            x_keep = np.concatenate([sol.y[:, 1:n_keep].T, x_stop[None]])
+            self.rec.steps(np.repeat(self.b, n_keep), t_keep, np.full(n_keep, self.j), x_keep)
         row, gi = self.rec.grid_due(self.b, np.array([t_stop]))
         if row.size:
             xs = dense(self.rec.grid_t[gi]).T
             self.rec.grid_fill(self.b[row], gi, np.full(row.size, self.j), xs)
-        self.t, self.x = t_stop, np.asarray(x_stop, dtype=float)
-        self.keep(self.t, self.x)
+        self.t, self.x = t_stop, x_stop
         if bracket is None:
             self.t = self.t_end
             return Status.RUNNING
@@ -194,20 +237,26 @@ class _Run:
             return Status.MAX_STEPS
         return status
 
-    def scan(self, dense: Any, t_start: float) -> tuple[float, float] | None:
-        """First sampled crossing on the steps of ``dense``, as a bracket, or None."""
+    def scan(self, dense: Any, t_start: float, g0: np.ndarray) -> tuple[float, float] | None:
+        """First sampled crossing on the steps of ``dense``, as a bracket, or None.
+
+        ``g0`` (m,) holds the event functions at the start of the segment, where
+        ``jumps()`` has just evaluated them.
+        """
         ts = np.asarray(dense.ts)
         S, m = self.opts.event_samples, self.sys.n_rules
-        times = ts[:-1, None] + np.diff(ts)[:, None] * (np.arange(1, S + 1) / S)[None, :]
-        gs = self.g(times.ravel(), dense(times.ravel()).T).reshape(times.shape[0], S, m)
-        g_start = np.concatenate([self.g(t_start, dense(t_start))[None], gs[:-1, -1]], axis=0)
+        h = np.diff(ts)
+        times = ts[:-1, None] + h[:, None] * self.theta[None, :]
+        t_all = times.ravel()
+        gs = self.gk(t_all, dense(t_all).T).reshape(times.shape[0], S, m)
+        g_start = np.concatenate([g0[None], gs[:-1, -1]], axis=0)
         probe = peak_probe(np.concatenate([g_start[:, None], gs], axis=1))
         k = np.flatnonzero(np.isfinite(probe))
-        t_all, g_all = times.ravel(), gs.reshape(-1, m)
+        g_all = gs.reshape(-1, m)
         if k.size:
-            tp = ts[k] + probe[k] * np.diff(ts)[k]
+            tp = ts[k] + probe[k] * h[k]
             t_all = np.concatenate([t_all, tp])
-            g_all = np.concatenate([g_all, self.g(tp, dense(tp).T)])
+            g_all = np.concatenate([g_all, self.gk(tp, dense(tp).T)])
         order = np.argsort(t_all, kind="stable")
         t_all, g_all = t_all[order], g_all[order]
         hit = np.flatnonzero((g_all >= 0).any(axis=1))
@@ -218,11 +267,11 @@ class _Run:
 
     def locate(self, dense: Any, a: float, b: float) -> float:
         """Earliest crossing in ``[a, b]`` (some g(b) >= 0), returned where ``g >= 0``."""
-        ga, gb = self.g(a, dense(a)), self.g(b, dense(b))
+        ga, gb = self.at(dense, a)[1], self.at(dense, b)[1]
         best = b
         for k in np.flatnonzero((ga < 0) & (gb >= 0)):
             r = brentq(
-                lambda s, k=k: float(self.g(s, dense(s))[k]),
+                lambda s, k=k: float(self.at(dense, s)[1][k]),
                 a,
                 b,
                 xtol=self.opts.event_xtol / 4,
@@ -230,7 +279,7 @@ class _Run:
             )
             best = min(best, r)
         for _ in range(_NUDGES):
-            if np.any(self.g(best, dense(best)) >= 0) or best >= self.t_end:
+            if np.any(self.at(dense, best)[1] >= 0) or best >= self.t_end:
                 break
             best = min(best + self.opts.event_xtol / 4, self.t_end)
         return best

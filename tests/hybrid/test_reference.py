@@ -1,0 +1,39 @@
+"""The reference backend evaluates the guard once per point, whatever the number of rules."""
+
+import numpy as np
+
+from etobs.hybrid import HybridSystem, solve_reference
+
+from .systems import bouncing_ball
+
+
+def _with_idle_rules(system, extra):
+    """``system`` plus ``extra`` rules that never fire; counts the guard calls."""
+    calls = [0]
+
+    def guard(t, x):
+        calls[0] += 1
+        g = system.guard(t, x)
+        return np.concatenate([g, np.full((g.shape[0], extra), -1.0)], axis=1)
+
+    wide = HybridSystem(
+        n=system.n,
+        n_rules=system.n_rules + extra,
+        flow=system.flow,
+        guard=guard,
+        jump=system.jump,
+    )
+    return wide, calls
+
+
+def test_guard_calls_do_not_grow_with_the_number_of_rules():
+    # solve_ivp calls its m event functions one by one at the same point; the
+    # reference answers the m - 1 others from the one guard evaluation.
+    ball = bouncing_ball()
+    one, calls_one = _with_idle_rules(ball, 0)
+    many, calls_many = _with_idle_rules(ball, 7)
+    a = solve_reference(one, [1.0, 0.0], (0.0, 1.2))
+    b = solve_reference(many, [1.0, 0.0], (0.0, 1.2))
+    assert calls_many[0] == calls_one[0]
+    np.testing.assert_array_equal(a.jumps.t, b.jumps.t)
+    np.testing.assert_array_equal(a.x_final, b.x_final)
