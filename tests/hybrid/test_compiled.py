@@ -1,66 +1,81 @@
-"""The compiled (numba) backend against the numpy solver on the same hybrid systems."""
+"""The engine (compile_system + solve_compiled) against the numpy solver and the scipy reference.
 
+The engine takes one-run functions (``flow(t, x) -> (n,)`` on 1-D arrays); the numpy
+solver and ``solve_reference`` take the batched systems of ``systems.py``. Each system
+used here is written twice: its batched form from ``systems.py`` and its one-run twin
+below.
+"""
+
+import numba
 import numpy as np
 import pytest
 
-numba = pytest.importorskip("numba")
+from etobs.compile import functions as cfun
+from etobs.errors import InputError, InputTypeError, ModelError
+from etobs.hybrid import SaveAt, SolverOptions, Status, _kernel, solve, solve_reference
+from etobs.hybrid import compiled as comp
+from etobs.hybrid.compiled import CompiledSystem, compile_system, solve_compiled
 
-from etobs.errors import InputError, InputTypeError  # noqa: E402
-from etobs.hybrid import (  # noqa: E402
-    HybridSystem,
-    SaveAt,
-    SolverOptions,
-    Status,
-    _kernel,
-    solve,
-)
-from etobs.hybrid import compiled as comp  # noqa: E402
-from etobs.hybrid.compiled import CompiledSystem, solve_compiled  # noqa: E402
+from .systems import G, bouncing_ball, grazing_oscillator, two_clocks
 
-G = 9.81
-
-
-@numba.njit
-def ball_flow(t, x, p, args, work, dx):
-    dx[0] = x[1]
-    dx[1] = -G
-
-
-@numba.njit
-def ball_guard(t, x, p, args, work, g):
-    g[0] = -x[0] if x[1] < 0 else -1.0
-
-
-@numba.njit
-def ball_jump(k, t, x, p, args, work):
-    x[0] = 0.0
-    x[1] = -p[0] * x[1]
-
-
-BALL = CompiledSystem(n=2, n_rules=1, flow=ball_flow, guard=ball_guard, jump=ball_jump, n_params=1)
 X0 = np.array([[1.0, 0.0], [2.0, 1.0], [0.5, -1.0]])
 
 
-def numpy_ball(r):
-    return HybridSystem(
+# ---- one-run twins of systems.py ---------------------------------------------------
+
+
+def ball_system():
+    """The bouncing ball; ``p = (restitution, g)``."""
+    return compile_system(
+        lambda t, x, p: np.array([x[1], -p[1]]),
+        lambda t, x, p: np.array([-x[0] if x[1] < 0 else -1.0]),
+        lambda k, t, x, p: np.array([0.0, -p[0] * x[1]]),
         n=2,
         n_rules=1,
-        flow=lambda t, x: np.stack([x[:, 1], -G + 0 * x[:, 0]], axis=1),
-        guard=lambda t, x: np.where(x[:, 1] < 0, -x[:, 0], -1.0)[:, None],
-        jump=lambda k, t, x: np.stack([0 * x[:, 0], -r * x[:, 1]], axis=1),
+        n_params=2,
+        rule_names=("impact",),
     )
 
 
-def bounce_times(h0, v0, r, n):
+def grazing_system(level=0.999):
+    return compile_system(
+        lambda t, x: np.array([x[1], -x[0]]),
+        lambda t, x: np.array([x[0] - level]),
+        lambda k, t, x: x * np.array([-1.0, 1.0]),
+        n=2,
+        n_rules=1,
+    )
+
+
+def clocks_system(period_a, period_b):
+    periods = np.array([period_a, period_b])
+
+    def jump(k, t, x):
+        out = x.copy()
+        out[k] = 0.0
+        return out
+
+    return compile_system(lambda t, x: np.ones(2), lambda t, x: x - periods, jump, n=2, n_rules=2)
+
+
+@pytest.fixture(scope="module")
+def ball():
+    return ball_system()
+
+
+def bounce_times(h0, v0, r, n, g=G):
     """Closed form: first impact from (h0, v0), then flights of 2 v_k / g."""
-    v = np.sqrt(v0**2 + 2 * G * h0)  # impact speed
-    t = (v0 + np.sqrt(v0**2 + 2 * G * h0)) / G
+    v = np.sqrt(v0**2 + 2 * g * h0)  # impact speed
+    t = (v0 + v) / g
     out = [t]
     for _ in range(n - 1):
         v *= r
-        t += 2 * v / G
+        t += 2 * v / g
         out.append(t)
     return np.array(out)
+
+
+# ---- against the closed form, the numpy solver and the scipy reference ---------------
 
 
 def test_status_codes_match_the_enum():
@@ -68,91 +83,206 @@ def test_status_codes_match_the_enum():
         assert getattr(_kernel, status.name) == status.value
 
 
-def test_ball_matches_closed_form_and_numpy_solver():
+def test_ball_matches_closed_form_numpy_solver_and_scipy_reference(ball):
     grid = np.linspace(0.0, 1.5, 31)
     save = SaveAt(steps=True, grid=grid)
-    ours = solve_compiled(BALL, X0, (0.0, 1.5), params=[0.8], save=save)
-    ref = solve(numpy_ball(0.8), X0, (0.0, 1.5), save=save)
-    assert ours.backend == "numba" and ours.ok
+    ours = solve_compiled(ball, X0, (0.0, 1.5), params=[0.8, G], save=save)
+    ref = solve(bouncing_ball(0.8), X0, (0.0, 1.5), save=save)
+    sci = solve_reference(bouncing_ball(0.8), X0, (0.0, 1.5), save=save)
+    assert ours.backend == "engine" and ours.ok and ref.backend == "numpy" and sci.backend == "scipy"
+    assert ours.rule_names == ("impact",)
     for r, (h0, v0) in enumerate(X0):
         t = ours.jumps.times(r, 0)
+        assert t.size == ref.jumps.times(r, 0).size == sci.jumps.times(r, 0).size >= 1
         np.testing.assert_allclose(t, bounce_times(h0, v0, 0.8, t.size), rtol=0, atol=1e-9)
         np.testing.assert_allclose(t, ref.jumps.times(r, 0), rtol=0, atol=1e-11)
-        assert t.size == ref.jumps.times(r, 0).size
+        np.testing.assert_allclose(t, sci.jumps.times(r, 0), rtol=0, atol=1e-9)
         np.testing.assert_array_equal(ours.arcs[r].j, ref.arcs[r].j)
         np.testing.assert_allclose(ours.arcs[r].t, ref.arcs[r].t, atol=1e-11)
         np.testing.assert_allclose(ours.arcs[r].x, ref.arcs[r].x, atol=1e-9)
     np.testing.assert_array_equal(ours.grid.j, ref.grid.j)
+    np.testing.assert_array_equal(ours.grid.j, sci.grid.j)
     np.testing.assert_allclose(ours.grid.x, ref.grid.x, atol=1e-9)
+    np.testing.assert_allclose(ours.grid.x, sci.grid.x, atol=1e-8)
+    np.testing.assert_array_equal(ours.n_steps, ref.n_steps)
+    np.testing.assert_allclose(ours.x_final, sci.x_final, atol=1e-8)
+
+
+def test_short_excursions_are_found_like_the_numpy_solver():
+    # Loose tolerances make steps of ~2 s while the event function is positive for only
+    # 0.09 s around each peak: the sampled guard with the peak probe finds every event,
+    # a sign test at step ends alone (event_samples=1) finds none.
+    loose = {"rtol": 1e-3, "atol": 1e-3}
+    x0, span = [0.0, 1.0], (0.0, 20.0)
+    system = grazing_system()
+    sign_only = solve_compiled(system, x0, span, options=SolverOptions(event_samples=1, **loose))
+    guarded = solve_compiled(system, x0, span, options=SolverOptions(**loose))
+    ref = solve(grazing_oscillator(), x0, span, options=SolverOptions(**loose))
+    tight = solve_compiled(system, x0, span)
+    sci = solve_reference(grazing_oscillator(), x0, span)
+    assert len(sign_only.jumps) == 0
+    assert len(guarded.jumps) == len(ref.jumps) == len(tight.jumps) == len(sci.jumps) == 7
+    np.testing.assert_allclose(guarded.jumps.t, ref.jumps.t, rtol=0, atol=1e-11)
+    # grazing crossings (g' ~ 0.045): bound the error in g, not in t
+    assert np.all(np.abs(tight.jumps.t - sci.jumps.t) * np.cos(np.arcsin(0.999)) < 1e-9)
+
+
+def test_simultaneous_events_jump_once_each_in_rule_order():
+    ours = solve_compiled(clocks_system(0.5, 0.25), [0.0, 0.0], (0.0, 1.01))
+    ref = solve(two_clocks(0.5, 0.25), [0.0, 0.0], (0.0, 1.01))
+    sci = solve_reference(two_clocks(0.5, 0.25), [0.0, 0.0], (0.0, 1.01))
+    log = ours.jumps
+    at_half = np.flatnonzero(np.isclose(log.t, 0.5, atol=1e-9))
+    assert log.rule[at_half].tolist() == [0, 1]
+    assert np.diff(log.j[at_half]).tolist() == [1]
+    assert np.bincount(log.rule).tolist() == [2, 4]
+    for other in (ref, sci):
+        assert log.rule.tolist() == other.jumps.rule.tolist()
+        np.testing.assert_allclose(log.t, other.jumps.t, rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_dopri5_matches_numpy_solver(ball):
+    opts = SolverOptions(method="dopri5", rtol=1e-9, atol=1e-9)
+    save = SaveAt(steps=False)
+    ours = solve_compiled(ball, X0, (0.0, 1.5), params=[0.8, G], options=opts, save=save)
+    ref = solve(bouncing_ball(0.8), X0, (0.0, 1.5), options=opts, save=save)
+    np.testing.assert_allclose(ours.jumps.t, ref.jumps.t, atol=1e-11)
     np.testing.assert_array_equal(ours.n_steps, ref.n_steps)
 
 
-def test_per_run_parameters_and_thread_split_do_not_change_runs():
-    P = np.array([[0.5], [0.8], [0.9]])
-    many = solve_compiled(BALL, X0, (0.0, 1.0), params=P, save=SaveAt(steps=False))
+# ---- parameters, threads, buffers, limits ------------------------------------------------
+
+
+def test_params_change_results_without_recompiling(ball):
+    # One CompiledSystem, per-run rows of (restitution, g): dropped from rest at h, each
+    # run's first impact is at sqrt(2 h / g) and then bounces with its own restitution.
+    P = np.array([[0.5, 9.81], [0.8, 1.62], [0.9, 24.79]])
+    h = np.array([1.0, 1.0, 0.5])
+    addresses, compiled = ball.addresses, len(cfun._MEMO)
+    sol = solve_compiled(ball, np.c_[h, np.zeros(3)], (0.0, 1.2), params=P, save=SaveAt(steps=False))
+    assert ball.addresses == addresses and len(cfun._MEMO) == compiled  # nothing compiled
+    assert sol.ok
+    first = [sol.jumps.times(r, 0)[0] for r in range(3)]
+    np.testing.assert_allclose(first, np.sqrt(2 * h / P[:, 1]), rtol=0, atol=1e-9)
+    assert len(set(np.round(first, 6))) == 3
     for r in range(3):
-        one = solve_compiled(BALL, X0[r], (0.0, 1.0), params=P[r], save=SaveAt(steps=False), parallel=False)
+        t = sol.jumps.times(r, 0)
+        np.testing.assert_allclose(t, bounce_times(h[r], 0.0, P[r, 0], t.size, P[r, 1]), atol=1e-9)
+    # one row for all runs
+    same = solve_compiled(ball, np.c_[h, np.zeros(3)], (0.0, 1.2), params=P[1], save=SaveAt(steps=False))
+    np.testing.assert_allclose(
+        [same.jumps.times(r, 0)[0] for r in range(3)], np.sqrt(2 * h / P[1, 1]), atol=1e-9
+    )
+
+
+def test_per_run_parameters_and_thread_split_do_not_change_runs(ball):
+    P = np.array([[0.5, G], [0.8, G], [0.9, G]])
+    many = solve_compiled(ball, X0, (0.0, 1.0), params=P, save=SaveAt(steps=False))
+    for r in range(3):
+        one = solve_compiled(ball, X0[r], (0.0, 1.0), params=P[r], save=SaveAt(steps=False), parallel=False)
         np.testing.assert_array_equal(one.jumps.t, many.jumps.select(run=r).t)
         np.testing.assert_array_equal(one.x_final[0], many.x_final[r])
 
 
-def test_small_buffers_are_regrown_without_changing_results(monkeypatch):
+def test_small_buffers_are_regrown_without_changing_results(ball, monkeypatch):
     # A Zeno-like ball (restitution 0.9) bounces ~100 times: more than the smallest
     # first-pass buffer of 64 entries, so those runs are solved again with room.
-    big = solve_compiled(BALL, X0, (0.0, 8.0), params=[0.9], save=SaveAt(steps=True))
+    big = solve_compiled(ball, X0, (0.0, 8.0), params=[0.9, G], save=SaveAt(steps=True))
     monkeypatch.setattr(comp, "_BUFFER_BUDGET", 1)
-    small = solve_compiled(BALL, X0, (0.0, 8.0), params=[0.9], save=SaveAt(steps=True))
+    small = solve_compiled(ball, X0, (0.0, 8.0), params=[0.9, G], save=SaveAt(steps=True))
     assert len(small.jumps) == len(big.jumps) > 3 * 64
     np.testing.assert_array_equal(small.jumps.t, big.jumps.t)
     for a, b in zip(small.arcs, big.arcs, strict=True):
         np.testing.assert_array_equal(a.x, b.x)
 
 
-def test_max_jumps_stops_a_zeno_run():
-    sol = solve_compiled(BALL, [1.0, 0.0], (0.0, 3.0), params=[0.5], options=SolverOptions(max_jumps=20))
+def test_max_jumps_stops_a_zeno_run(ball):
+    sol = solve_compiled(ball, [1.0, 0.0], (0.0, 3.0), params=[0.5, G], options=SolverOptions(max_jumps=20))
     assert sol.status[0] == Status.MAX_JUMPS
     assert len(sol.jumps) == 20
 
 
-@pytest.mark.slow
-def test_dopri5_matches_numpy_solver():
-    opts = SolverOptions(method="dopri5", rtol=1e-9, atol=1e-9)
-    ours = solve_compiled(BALL, X0, (0.0, 1.5), params=[0.8], options=opts, save=SaveAt(steps=False))
-    ref = solve(numpy_ball(0.8), X0, (0.0, 1.5), options=opts, save=SaveAt(steps=False))
-    np.testing.assert_allclose(ours.jumps.t, ref.jumps.t, atol=1e-11)
-    np.testing.assert_array_equal(ours.n_steps, ref.n_steps)
+# ---- what a system can be made of ------------------------------------------------------
 
 
-def test_bad_inputs_are_named():
-    with pytest.raises(InputTypeError, match=r"`flow` must be a numba-compiled function .*got function"):
-        CompiledSystem(n=2, n_rules=1, flow=lambda *a: None, guard=ball_guard, jump=ball_jump)
-    with pytest.raises(InputError, match=r"`params` must have shape \(1,\) or \(3, 1\); got \(2,\)"):
-        solve_compiled(BALL, X0, (0.0, 1.0), params=[0.5, 0.5])
-    with pytest.raises(InputError, match="`params` is required: the system has n_params=1"):
-        solve_compiled(BALL, X0, (0.0, 1.0))
+def _decay_rate(x):
+    """A plain Python helper called by a flow: compiled with it."""
+    return -1.5 * x
+
+
+@numba.njit
+def _double(k, t, x):
+    return 2.0 * x
+
+
+def test_helpers_njit_functions_and_systems_without_rules():
+    system = compile_system(lambda t, x: _decay_rate(x), lambda t, x: np.array([0.5 - x[0]]), _double, 1, 1)
+    sol = solve_compiled(system, [1.0], (0.0, 1.0))
+    t_hit = np.log(2.0) / 1.5  # x = exp(-1.5 t) reaches 0.5 and is doubled back to 1
+    np.testing.assert_allclose(sol.jumps.t, [t_hit, 2 * t_hit], atol=1e-9)
+    np.testing.assert_allclose(sol.x_final[0, 0], np.exp(-1.5 * (1.0 - 2 * t_hit)), rtol=1e-9)
+    free = compile_system(lambda t, x: -x, lambda t, x: np.zeros(0), _double, 1, 0)
+    sol = solve_compiled(free, [[1.0], [2.0]], (0.0, 1.0))
+    assert free.n_rules == 0 and len(sol.jumps) == 0 and sol.ok
+    np.testing.assert_allclose(sol.x_final[:, 0], [np.exp(-1.0), 2 * np.exp(-1.0)], rtol=1e-9)
+
+
+def test_wrong_shape_during_a_run_is_a_model_error_naming_the_function():
+    def flow(t, x, p):
+        if p[0] > 0 and x[0] < 0.5:  # the flagged run goes wrong half way down
+            return np.zeros(3)
+        return np.array([x[1], -G])
+
+    system = compile_system(
+        flow,
+        lambda t, x, p: np.array([-x[0] if x[1] < 0 else -1.0]),
+        lambda k, t, x, p: np.array([0.0, -0.5 * x[1]]),
+        n=2,
+        n_rules=1,
+        n_params=1,
+    )
+    sol = solve_compiled(system, [[1.0, 0.0], [1.0, 0.0]], (0.0, 0.4), params=[[1.0], [0.0]])
+    assert sol.status_labels() == ["model_error", "completed"]
+    assert Status.MODEL_ERROR.label == "model_error"
+    assert sol.failures[0].startswith("`flow` returned the wrong shape") and sol.failures[1] == ""
+    assert "`flow` returned the wrong shape" in sol.messages()[0]
+    assert 0.0 < sol.t_final[0] <= np.sqrt(2 * 0.5 / G)  # stopped before x = 0.5
+    assert sol.t_final[1] == 0.4
+
+
+class _Gain:
+    def __call__(self, x):
+        return 2.0 * x
+
+
+def test_a_function_numba_cannot_compile_is_a_model_error():
+    gain = _Gain()  # an arbitrary Python object
+
+    def flow(t, x):
+        return gain(x)
+
+    with pytest.raises(ModelError, match=r"^`flow` cannot be compiled: .*backend='scipy'"):
+        compile_system(flow, lambda t, x: x, lambda k, t, x: x, n=1, n_rules=1)
+    with pytest.raises(ModelError, match="`jump` cannot be compiled"):
+        compile_system(lambda t, x: x, lambda t, x: x, lambda k, t, x: gain.missing(x), n=1, n_rules=1)
+
+
+def test_bad_inputs_are_named(ball):
+    with pytest.raises(InputError, match=r"`params` must have shape \(2,\) or \(3, 2\); got \(3,\)"):
+        solve_compiled(ball, X0, (0.0, 1.0), params=[0.5, 0.5, 0.5])
+    with pytest.raises(InputError, match="`params` is required: the system has n_params=2"):
+        solve_compiled(ball, X0, (0.0, 1.0))
+    with pytest.raises(InputError, match="`params` must be finite"):
+        solve_compiled(ball, X0, (0.0, 1.0), params=[0.5, np.nan])
     with pytest.raises(InputError, match=r"`x0` .*"):
-        solve_compiled(BALL, [1.0, 2.0, 3.0], (0.0, 1.0), params=[0.5])
+        solve_compiled(ball, [1.0, 2.0, 3.0], (0.0, 1.0), params=[0.5, G])
     with pytest.raises(InputTypeError, match="`system` must be a CompiledSystem; got HybridSystem"):
-        solve_compiled(numpy_ball(0.5), X0, (0.0, 1.0))
+        solve_compiled(bouncing_ball(0.5), X0, (0.0, 1.0))
     with pytest.raises(InputError, match="`rule_names` has 2 names; expected n_rules=1"):
-        CompiledSystem(
-            n=2, n_rules=1, flow=ball_flow, guard=ball_guard, jump=ball_jump, rule_names=("a", "b")
+        compile_system(
+            lambda t, x: x, lambda t, x: x, lambda k, t, x: x, n=1, n_rules=1, rule_names=("a", "b")
         )
-
-
-def test_missing_numba_says_how_to_install(monkeypatch):
-    import builtins
-
-    real = builtins.__import__
-
-    def no_numba(name, *args, **kwargs):
-        if name == "numba":
-            raise ImportError("no numba here")
-        return real(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_numba)
-    assert not comp.numba_available()
-    with pytest.raises(
-        InputError, match=r"needs the optional dependency numba.*pip install 'etobs\[numba\]'"
-    ):
-        comp.require_numba()
+    with pytest.raises(InputError, match="`n`"):
+        compile_system(lambda t, x: x, lambda t, x: x, lambda k, t, x: x, n=0, n_rules=1)
+    assert isinstance(ball, CompiledSystem)

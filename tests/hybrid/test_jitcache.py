@@ -1,136 +1,241 @@
-"""The on-disk compile cache of the compiled backend (etobs.hybrid._jitcache)."""
+"""The on-disk compile caches: the kernel template (etobs.hybrid._jitcache) and the
+content-keyed cache of the user's functions (etobs.compile)."""
 
-import os
+import json
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
-numba = pytest.importorskip("numba")
+from etobs.compile import FunctionSpec, compile_function
+from etobs.compile import cache as ccache
+from etobs.compile.fingerprint import fingerprint
+from etobs.hybrid import _jitcache
 
-from etobs.hybrid import _jitcache  # noqa: E402
-from etobs.hybrid.compiled import CompiledSystem, solve_compiled  # noqa: E402
+TEMPLATE = "@jit\ndef twice(x):\n    return K * x + V[0]\n"
 
-from .test_compiled import ball_flow, ball_jump  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
+def _run(script: str) -> dict:
+    """Run ``script`` in a fresh interpreter (same environment) and read its last line as JSON."""
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# ---- folders -------------------------------------------------------------------------
 
 
 def test_cache_dir_from_environment(monkeypatch, tmp_path):
     monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path / "k"))
-    assert _jitcache.cache_dir() == tmp_path / "k"
-    for off in ("off", "0", "", "None"):
+    assert ccache.cache_dir() == tmp_path / "k"
+    assert _jitcache.cache_dir() == tmp_path / "k" / "kernels"
+    for off in ("off", "0", "", "None", " OFF "):
         monkeypatch.setenv("ETOBS_CACHE_DIR", off)
+        assert ccache.cache_dir() is None
         assert _jitcache.cache_dir() is None
     monkeypatch.delenv("ETOBS_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert ccache.cache_dir() == tmp_path / "xdg" / "etobs"
     assert _jitcache.cache_dir() == tmp_path / "xdg" / "etobs" / "kernels"
     monkeypatch.delenv("XDG_CACHE_HOME")
+    assert ccache.cache_dir() == Path.home() / ".cache" / "etobs"
     assert _jitcache.cache_dir() == Path.home() / ".cache" / "etobs" / "kernels"
 
 
-def test_reference_names_importable_functions_only():
-    ref = _jitcache.reference(ball_flow)
-    assert ref == "tests.hybrid.test_compiled:ball_flow"
-    assert _jitcache.resolve(ref) is ball_flow
-
-    @numba.njit
-    def local(x):
-        return x
-
-    assert _jitcache.reference(local) is None  # a closure cannot be imported
-    assert _jitcache.reference(lambda x: x) is None  # not compiled
-    assert _jitcache.reference(np.sin) is None
+# ---- the kernel template ---------------------------------------------------------------
 
 
 def test_constants_are_written_exactly():
     values = {
         "A": np.array([[0.1, 1 / 3], [np.pi, -2.5e-300]]),
+        "N": np.array([3, -4], dtype=np.int64),
         "I": 7,
         "F": 1 / 7,
         "B": True,
         "INF": np.inf,
+        "NAN": np.float64(np.nan),
     }
     ns: dict = {}
     exec("import numpy\n" + "\n".join(f"{k} = {_jitcache._literal(k, v)}" for k, v in values.items()), ns)
     assert np.array_equal(ns["A"], values["A"]) and ns["A"].dtype == np.float64
+    assert np.array_equal(ns["N"], values["N"]) and ns["N"].dtype == np.int64
     assert ns["I"] == 7 and ns["F"] == 1 / 7 and ns["B"] is True and ns["INF"] == np.inf
+    assert np.isnan(ns["NAN"])
     with pytest.raises(
         TypeError, match="constant 'S' must be a bool, int, float or a float64 or int64 array; got str"
     ):
         _jitcache._literal("S", "text")
 
 
-def _ball_script() -> str:
-    return textwrap.dedent(
-        """
-        import json, numpy as np
-        from etobs.hybrid import compiled as comp
-        from tests.hybrid.test_compiled import BALL
-        sol = comp.solve_compiled(BALL, [[1.0, 0.0], [2.0, 1.0]], (0.0, 3.0), params=[0.5])
-        kernel = next(iter(comp._BUILT.values()))[0]
-        print(json.dumps({"hits": sum(kernel.stats.cache_hits.values()),
-                          "misses": sum(kernel.stats.cache_misses.values()),
-                          "t": sol.jumps.t.tolist()}))
-        """
-    )
+def test_build_writes_one_module_per_content_and_reuses_it(tmp_path, monkeypatch):
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path / "cache"))
+    template = tmp_path / "tpl.py"
+    template.write_text(TEMPLATE)
+    dep = tmp_path / "dep.py"
+    dep.write_text("# one\n")
+    consts = {"K": 2.0, "V": np.array([0.5])}
+    ns = _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
+    assert ns["twice"](3.0) == 6.5
+    folder = tmp_path / "cache" / "kernels"
+    files = sorted(p.name for p in folder.glob("*.py"))
+    assert len(files) == 1 and files[0].startswith("tpl_")
+    text = (folder / files[0]).read_text()
+    assert text.startswith("# generated by etobs from tpl.py") and "numba.njit(cache=True)" in text
+    assert list((folder / "__pycache__").glob("*.nbi"))  # numba saved the machine code
+    again = _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
+    assert again["twice"] is ns["twice"]  # the same module, imported once
+    other = _jitcache.build("tpl", template, {"K": 3.0, "V": np.array([0.5])}, {"jit": {}}, depends=(dep,))
+    assert other["twice"](3.0) == 9.5
+    dep.write_text("# two\n")
+    _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
+    assert len(list(folder.glob("*.py"))) == 3  # a new constant or dependency: a new file
 
 
-def test_second_process_loads_the_compiled_kernel_from_disk(tmp_path):
-    import json
-
-    env = {**os.environ, "ETOBS_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
-    runs = []
-    for _ in range(2):
-        out = subprocess.run(
-            [sys.executable, "-c", _ball_script()],
-            env=env,
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert out.returncode == 0, out.stderr
-        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
-    assert (runs[0]["hits"], runs[0]["misses"]) == (0, 1)  # compiled, then saved
-    assert (runs[1]["hits"], runs[1]["misses"]) == (1, 0)  # loaded
-    assert runs[0]["t"] == runs[1]["t"] and len(runs[0]["t"]) > 5
-    generated = sorted(p.name for p in tmp_path.glob("*.py"))
-    assert len(generated) == 1 and generated[0].startswith("kernel_dop853_")
-
-
-def test_functions_that_cannot_be_imported_compile_in_memory(tmp_path, monkeypatch):
-    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path))
-
-    @numba.njit
-    def flow(t, x, p, args, work, dx):
-        dx[0] = -x[0]
-
-    @numba.njit
-    def guard(t, x, p, args, work, g):
-        g[0] = x[0] - 2.0
-
-    system = CompiledSystem(n=1, n_rules=1, flow=flow, guard=guard, jump=ball_jump)
-    sol = solve_compiled(system, [1.0], (0.0, 1.0))
-    assert abs(sol.x_final[0, 0] - np.exp(-1.0)) < 1e-9
-    assert list(tmp_path.iterdir()) == []  # nothing written
+def test_build_without_a_cache_compiles_in_memory(tmp_path, monkeypatch):
+    monkeypatch.setenv("ETOBS_CACHE_DIR", "off")
+    template = tmp_path / "tpl.py"
+    template.write_text(TEMPLATE)
+    ns = _jitcache.build("mem", template, {"K": 2.0, "V": np.array([1.0])}, {"jit": {"fastmath": False}})
+    assert ns["twice"](3.0) == 7.0
+    assert ns["__name__"] == "etobs._template_mem"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tpl.py"]  # nothing written
 
 
 def test_unusable_cache_folder_warns_and_compiles_in_memory(tmp_path, monkeypatch):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    monkeypatch.setenv("ETOBS_CACHE_DIR", str(blocker / "kernels"))
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(blocker))
     monkeypatch.setattr(_jitcache, "_WARNED", [])
     template = tmp_path / "tpl.py"
-    template.write_text("@jit\ndef twice(x):\n    return K * FN(x)\n")
+    template.write_text(TEMPLATE)
     with pytest.warns(RuntimeWarning, match="cannot use the compile cache in .*kernels.*compiling in memory"):
-        ns = _jitcache.build("t", template, {"K": 2.0}, {"FN": ball_identity}, {"jit": {}})
+        ns = _jitcache.build("t", template, {"K": 2.0, "V": np.array([0.0])}, {"jit": {}})
     assert ns["twice"](3.0) == 6.0
 
 
-@numba.njit
-def ball_identity(x):
-    return x
+def test_second_process_loads_the_built_template_from_disk(tmp_path, monkeypatch):
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path / "cache"))
+    template = tmp_path / "tpl.py"
+    template.write_text(TEMPLATE)
+    script = f"""
+        import json, numpy as np
+        from pathlib import Path
+        from etobs.hybrid import _jitcache
+        ns = _jitcache.build("tpl", Path({str(template)!r}), {{"K": 2.0, "V": np.array([0.5])}}, {{"jit": {{}}}})
+        value = ns["twice"](3.0)
+        stats = ns["twice"].stats
+        print(json.dumps({{"hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values()),
+                          "value": value}}))
+        """
+    first, second = _run(script), _run(script)
+    assert (first["hits"], first["misses"]) == (0, 1)  # compiled, then saved
+    assert (second["hits"], second["misses"]) == (1, 0)  # loaded
+    assert first["value"] == second["value"] == 6.5
+
+
+# ---- the content-keyed cache of user functions ------------------------------------------
+
+
+def _scale(x):
+    return 2.0 * x
+
+
+def _uses_global_helper(t, x):
+    return _scale(x)
+
+
+def _closure(arr, helper):
+    return lambda t, x: helper(arr @ x)
+
+
+def _triple(x):
+    return 3.0 * x
+
+
+def test_fingerprint_is_equal_for_equal_content():
+    a1 = np.array([[1.0, 2.0], [3.0, 4.0]])
+    a2 = a1.copy()
+    assert fingerprint(_closure(a1, _scale)) == fingerprint(_closure(a2, _scale))
+
+    k1 = np.ones(2)
+    f = lambda x: k1 * 2.0  # noqa: E731
+    g = lambda x: k1 * 2.0  # noqa: E731  (another line, same content)
+    assert fingerprint(f) == fingerprint(g)
+    assert fingerprint(numba.njit(_uses_global_helper)) == fingerprint(_uses_global_helper)
+
+
+def test_fingerprint_changes_with_closed_over_values_and_called_helpers(monkeypatch):
+    a = np.array([[1.0, 2.0], [3.0, 4.0]])
+    base = fingerprint(_closure(a, _scale))
+    changed = a.copy()
+    changed[1, 1] = 4.5
+    assert fingerprint(_closure(changed, _scale)) != base  # another value
+    assert fingerprint(_closure(a.reshape(1, 4), _scale)) != base  # same bytes, another shape
+    assert fingerprint(_closure(a.astype(np.float32), _scale)) != base  # another dtype
+    assert fingerprint(_closure(a, _triple)) != base  # another helper in the closure
+    k = np.ones(2)
+    assert fingerprint(lambda x: k * 2.0) != fingerprint(lambda x: k * 3.0)  # another constant
+
+    glob = fingerprint(_uses_global_helper)
+    monkeypatch.setattr(sys.modules[__name__], "_scale", _triple)  # the global helper changes
+    assert fingerprint(_uses_global_helper) != glob
+    monkeypatch.undo()
+    assert fingerprint(_uses_global_helper) == glob
+
+
+def test_equal_functions_share_one_compiled_function():
+    spec = FunctionSpec("t, A0", (2,), 2)
+    a = np.array([[1.0, 2.0], [3.0, 4.0]])
+    one = compile_function(_closure(a, _scale), spec, "first")
+    two = compile_function(_closure(a.copy(), _scale), spec, "second")
+    three = compile_function(_closure(2 * a, _scale), spec, "third")
+    assert one.address == two.address != three.address
+    assert (one.name, two.name) == ("first", "second")
+
+
+_FUNCTION_SCRIPT = """
+    import json, numpy as np
+    from pathlib import Path
+    from etobs.compile import FunctionSpec, compile_function
+    from etobs.compile.batch import batch_call
+
+    A = np.array([[0.0, 1.0], [-{k}, -0.5]])
+    helper = lambda x: A @ x
+    fn = lambda t, x: helper(x) + np.sin(t)  # a lambda in -c code: no source file
+    cf = compile_function(fn, FunctionSpec("t, A0", (2,), 2), "f")
+    t = np.array([0.0, 0.5, 1.0])
+    x = np.array([[1.0, 2.0], [0.5, -1.0], [3.0, 0.0]])
+    out = np.empty((3, 2))
+    empty = np.zeros((3, 0))
+    status = batch_call(cf.address, 0, t, x, empty, empty, empty, np.zeros(0), out)
+    folder = Path({folder!r})
+    print(json.dumps({{"status": int(status), "out": out.tolist(), "hits": cf.cfunc.cache_hits,
+                      "nbc": sorted(p.name for p in folder.glob("*.nbc")),
+                      "nbi": sorted(p.name for p in folder.glob("*.nbi"))}}))
+    """
+
+
+def test_compiled_functions_are_cached_on_disk_for_the_next_process(tmp_path, monkeypatch):
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path))
+    folder = tmp_path / "functions"
+    first = _run(_FUNCTION_SCRIPT.format(k=2.0, folder=str(folder)))
+    assert first["status"] == 1 and first["hits"] == 0
+    assert first["nbc"] and first["nbi"]  # index and machine code written under <dir>/functions
+    second = _run(_FUNCTION_SCRIPT.format(k=2.0, folder=str(folder)))
+    assert second["status"] == 1 and second["hits"] == 1  # loaded, not compiled
+    assert second["nbc"] == first["nbc"] and second["nbi"] == first["nbi"]  # nothing new
+    assert second["out"] == first["out"]
+    A = np.array([[0.0, 1.0], [-2.0, -0.5]])
+    x = np.array([[1.0, 2.0], [0.5, -1.0], [3.0, 0.0]])
+    expected = x @ A.T + np.sin([0.0, 0.5, 1.0])[:, None]
+    np.testing.assert_allclose(first["out"], expected, rtol=1e-15)
+    # another closed-over value is another function: compiled and saved next to the first
+    third = _run(_FUNCTION_SCRIPT.format(k=3.0, folder=str(folder)))
+    assert third["hits"] == 0 and len(third["nbc"]) > len(first["nbc"])
+    assert third["out"] != first["out"]

@@ -1,111 +1,58 @@
-"""Building the compiled backend's templates, with an on-disk cache of their machine code.
+"""Building the engine's kernel template, with an on-disk cache of its machine code.
 
-The compiled kernel (:mod:`etobs.hybrid._kernel`) and the compiled estimation model
-(:mod:`etobs.estimation.compiled`) are templates: Python text whose globals are the
-user's numba functions and some constants, so that numba inlines them. Compiling one
-takes about ten seconds.
+The compiled kernel (:mod:`etobs.hybrid._kernel`) is a template: Python text whose
+globals are a method's tableau as constants, so that numba folds the coefficients.
+Compiling it takes tens of seconds; it does not depend on the system solved (the
+system's functions are called by address), so it is compiled once per machine and
+method.
 
-numba can keep machine code on disk (``cache=True``), keyed by the path and time stamp
-of the function's source file, but only for functions defined in a real file. So when
-every function a template uses can be imported again by name (it is a module-level
-``@numba.njit`` function of an importable module), :func:`build` writes the filled-in
-template to a file in the cache folder, named by a hash of its text, of the files of
-the modules it imports functions from, and of the numba and Python versions, and
-imports it with ``cache=True``: the next process (a sweep worker, a second run of a
-script) loads the machine code instead of compiling. Otherwise (functions defined in
-``__main__``, in a closure or a notebook) the template is compiled in memory as before.
+numba keeps machine code on disk (``cache=True``) keyed by the path and time stamp of
+the function's source file, so :func:`build` writes the filled-in template to a file in
+the cache folder, named by a hash of its text, of the files it depends on, and of the
+numba and Python versions, and imports it: the next process (a sweep worker, a second
+run of a script) loads the machine code instead of compiling.
 
-The cache folder is ``$ETOBS_CACHE_DIR`` if set (``off`` disables the cache), else
-``$XDG_CACHE_HOME/etobs/kernels`` or ``~/.cache/etobs/kernels``. Deleting it is
-always safe.
-
-Limitation (numba's own): a change to a module that the user's compiled functions read
-constants from, other than the module that defines them, is not seen; the defining
-module's text is part of the hash.
+The folder is ``kernels`` in :func:`etobs.compile.cache.cache_dir` (``$ETOBS_CACHE_DIR``,
+``off`` disables the cache). Deleting it is always safe.
 """
 
 from __future__ import annotations
 
 import hashlib
-import importlib
 import importlib.util
 import os
 import sys
 import threading
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-ENV = "ETOBS_CACHE_DIR"
+from etobs.compile import cache as _cache
+
 #: Prefix of the names under which generated modules are registered in ``sys.modules``.
 GENERATED = "_etobs_generated_"
-_OFF = {"", "0", "off", "none", "false", "no"}
-_LOCK = threading.RLock()  # a generated module may import another while loading
+_LOCK = threading.RLock()
 _WARNED: list[str] = []
 
 
 def cache_dir() -> Path | None:
     """The folder of generated modules and their machine code, or ``None`` when disabled."""
-    raw = os.environ.get(ENV)
-    if raw is not None:
-        if raw.strip().lower() in _OFF:
-            return None
-        return Path(raw).expanduser()
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
-    return base / "etobs" / "kernels"
-
-
-def reference(fn: Any) -> str | None:
-    """``"module:qualname"`` under which the compiled function ``fn`` can be imported again.
-
-    Functions of generated modules are referred to by their file (``"/path.py:name"``).
-    Returns ``None`` for functions that cannot be found by name (``__main__``, closures,
-    lambdas, replaced module attributes).
-    """
-    py = getattr(fn, "py_func", None)
-    if py is None:
-        return None
-    mod_name, qual = py.__module__, py.__qualname__
-    if mod_name == "__main__" or "<" in qual:
-        return None
-    module = sys.modules.get(mod_name)
-    file = getattr(module, "__file__", None)
-    if module is None or not file:
-        return None
-    obj: Any = module
-    for part in qual.split("."):
-        obj = getattr(obj, part, None)
-    if obj is not fn:
-        return None
-    return f"{file}:{qual}" if mod_name.startswith(GENERATED) else f"{mod_name}:{qual}"
-
-
-def resolve(ref: str) -> Any:
-    """The object a :func:`reference` names (imports its module)."""
-    where, _, qual = ref.rpartition(":")
-    module = _load_file(Path(where)) if where.endswith(".py") else importlib.import_module(where)
-    obj: Any = module
-    for part in qual.split("."):
-        obj = getattr(obj, part)
-    return obj
+    base = _cache.cache_dir()
+    return None if base is None else base / "kernels"
 
 
 def build(
     kind: str,
     template: Path,
     constants: Mapping[str, Any],
-    functions: Mapping[str, Any],
     decorators: Mapping[str, Mapping[str, Any]],
     depends: tuple[Path, ...] = (),
-    inline: bool = False,
 ) -> Mapping[str, Any]:
-    """Run ``template`` with ``constants``, ``functions`` and numba ``decorators`` as globals.
+    """Run ``template`` with ``constants`` and numba ``decorators`` as globals.
 
     Parameters
     ----------
@@ -115,20 +62,11 @@ def build(
         The template's text.
     constants : mapping
         Globals of type bool, int, float or float64/int64 ndarray, written into the module as literals.
-    functions : mapping
-        Globals that are numba-compiled functions.
     decorators : mapping
         Globals that are ``numba.njit(**kwargs)`` decorators, by their keyword arguments.
     depends : tuple of Path
         Files whose text the compiled code depends on besides the template (their text
         is part of the cache key).
-    inline : bool
-        Inline ``functions`` into the template's functions at numba's IR level (their
-        Python code is compiled again as ``numba.njit(inline="always")``); the original
-        compiled function stays available as ``<name>_call``. A call to a separately
-        compiled function costs several nanoseconds; for functions called hundreds of
-        thousands of times per run, that is most of their cost. Every call site of an
-        inlined function gets a copy of its code, so keep their number small.
 
     Returns
     -------
@@ -136,67 +74,43 @@ def build(
         The globals of the executed template.
 
     """
-    job = _Template(kind, template, constants, functions, decorators, depends, inline)
     folder = cache_dir()
-    if folder is not None and all(reference(fn) for fn in functions.values()):
+    if folder is not None:
         try:
-            return _generate(job, folder)
+            return _generate(kind, template, constants, decorators, depends, folder)
         except OSError as exc:
             _warn_once(f"etobs: cannot use the compile cache in {folder} ({exc}); compiling in memory")
-    return _generate(job, None)
+    return _generate(kind, template, constants, decorators, depends, None)
 
 
-@dataclass(frozen=True)
-class _Template:
-    """The arguments of :func:`build`."""
-
-    kind: str
-    template: Path
-    constants: Mapping[str, Any]
-    functions: Mapping[str, Any]
-    decorators: Mapping[str, Mapping[str, Any]]
-    depends: tuple[Path, ...]
-    inline: bool
-
-
-def _generate(job: _Template, folder: Path | None) -> Mapping[str, Any]:
-    """Run ``job`` with the cache in ``folder``, or in memory when ``folder`` is None."""
+def _generate(
+    kind: str,
+    template: Path,
+    constants: Mapping[str, Any],
+    decorators: Mapping[str, Mapping[str, Any]],
+    depends: tuple[Path, ...],
+    folder: Path | None,
+) -> Mapping[str, Any]:
     import numba
 
-    kind, template, constants, functions = job.kind, job.template, job.constants, job.functions
-    decorators, depends, inline = job.decorators, job.depends, job.inline
-    cached = folder is not None
     lines = [f"# generated by etobs from {template.name}; do not edit", "import numba", "import numpy"]
     for name, value in constants.items():
         lines.append(f"{name} = {_literal(name, value)}")
-    refs = {name: reference(fn) for name, fn in functions.items()}
-    if cached:
-        lines.append("from etobs.hybrid._jitcache import resolve as _resolve")
-        lines += [f"{name} = _resolve({ref!r})" for name, ref in refs.items()]
-    if not inline:
-        lines += [f"{name}_call = {name}" for name in functions]
-    if inline:
-        for name in functions:
-            lines.append(f"{name}_call = {name}")
-            lines.append(f"{name} = numba.njit(inline='always')({name}.py_func)")
     for name, kwargs in decorators.items():
-        args = ", ".join(f"{k}={v!r}" for k, v in {**kwargs, "cache": cached}.items())
+        args = ", ".join(f"{k}={v!r}" for k, v in {**kwargs, "cache": folder is not None}.items())
         lines.append(f"{name} = numba.njit({args})")
     source = "\n".join(lines) + "\n\n" + template.read_text(encoding="utf-8")
-    if folder is not None:
-        key = hashlib.sha256(source.encode())
-        for ref in refs.values():
-            assert ref is not None
-            key.update(_file_bytes(ref))
-        for path in depends:
-            key.update(path.read_bytes())
-        key.update(f"{numba.__version__} {sys.version}".encode())
-        path = folder / f"{kind}_{key.hexdigest()[:24]}.py"
-        _write_once(path, source)
-        return vars(_load_file(path))
-    namespace: dict[str, Any] = {"__name__": f"etobs._template_{kind}", **functions}
-    exec(compile(source, str(template), "exec"), namespace)
-    return namespace
+    if folder is None:
+        namespace: dict[str, Any] = {"__name__": f"etobs._template_{kind}"}
+        exec(compile(source, str(template), "exec"), namespace)
+        return namespace
+    key = hashlib.sha256(source.encode())
+    for path in depends:
+        key.update(path.read_bytes())
+    key.update(f"{numba.__version__} {sys.version}".encode())
+    path = folder / f"{kind}_{key.hexdigest()[:24]}.py"
+    _write_once(path, source)
+    return vars(_load_file(path))
 
 
 def _literal(name: str, value: Any) -> str:
@@ -222,15 +136,6 @@ def _literal(name: str, value: Any) -> str:
 def _float(x: Any) -> str:
     text = repr(float(x))
     return text if np.isfinite(x) else f"float({text!r})"
-
-
-def _file_bytes(ref: str) -> bytes:
-    """Text of the file that defines the function ``ref`` names."""
-    where = ref.rpartition(":")[0]
-    if where.endswith(".py"):
-        return where.encode()  # a generated file: its name is the hash of its text
-    file = getattr(sys.modules[where], "__file__", None) or ""
-    return Path(file).read_bytes() if file else where.encode()
 
 
 def _write_once(path: Path, source: str) -> None:

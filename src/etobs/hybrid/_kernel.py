@@ -13,17 +13,18 @@ for one run at a time so that no work is done for runs that do not need it:
   safeguard to ``event_xtol`` in time, the event reported at the right end;
 * all rules with ``g_k >= 0`` jump once, in rule order, until all are negative.
 
-User functions (numba-compiled, passed as arguments) have the signatures
+The system's flow, guard and jump are C functions called by address (see
+:mod:`etobs.compile.ccall`); the kernel's ``args`` are ``(addresses, ia, cf)``: the
+three addresses, and integer and float data shared by all runs that the functions
+receive as ``ia`` and ``a1``. Each call gets the run's parameter vector ``p`` (a row
+of ``P``) and, as ``a2``, the run's scratch array of ``n_work`` floats. So the kernel
+does not depend on the system: it is compiled once per machine and method, and cached.
 
-``flow(t, x, p, args, dx)``
-    write ``x'`` into ``dx``;
-``guard(t, x, p, args, g)``
-    write the event function of every rule into ``g`` (jump where ``g_k >= 0``);
-``jump(k, t, x, p, args)``
-    apply rule ``k``'s jump map to ``x`` in place;
-
-where ``p`` is the run's parameter vector (a row of ``P``) and ``args`` any value
-shared by all runs (typically a tuple of arrays).
+``flow``: ``out = x'`` at ``(t, x = a0)``; ``guard``: ``out = g`` (rule ``k`` jumps where
+``g_k >= 0``); ``jump``: ``out = x+`` of rule ``k``. A call that does not return
+``OK`` (1) stops the run with status ``model_error``, and the run's ``error_code`` says
+which function failed and how (``16 * slot + failure``, slots 1, 2, 3 for flow, guard,
+jump unless the function reports its own code >= 16).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from etobs.compile.ccall import ccall
 from etobs.hybrid import _jitcache
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
@@ -46,13 +48,56 @@ MAX_JUMPS = int(Status.MAX_JUMPS)
 MAX_STEPS = int(Status.MAX_STEPS)
 NONFINITE = int(Status.NONFINITE)
 STEP_UNDERFLOW = int(Status.STEP_UNDERFLOW)
+MODEL_ERROR = int(Status.MODEL_ERROR)
 
 MAX_ROOT_ITER = 200
 EPS = np.finfo(np.float64).eps
 
 # Indices into the float and integer option vectors.
 F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
-I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS = 0, 1, 2, 3
+I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK = 0, 1, 2, 3, 4
+#: Slots of the system's functions in failure codes.
+FLOW, GUARD, JUMP = 1, 2, 3
+
+
+@numba.njit
+def _failed(args, slot, st, out):
+    """Record the run's first failure (``16 * slot + st`` unless ``st`` is a code) and poison ``out``."""
+    if args[2][0] == 0:
+        args[2][0] = st if st >= 16 else 16 * slot + st
+    for i in range(out.shape[0]):
+        out[i] = np.nan
+
+
+@numba.njit
+def flow(t, x, p, args, dx):
+    """``dx = x'`` by the system's flow function (``args = ((addresses, ia, cf), work, failure)``)."""
+    a = args[0]
+    st = ccall(a[0][0], 0, t, x, a[2], args[1], a[2], a[1], p, dx)
+    if st != 1:
+        _failed(args, FLOW, st, dx)
+
+
+@numba.njit
+def guard(t, x, p, args, g):
+    """``g`` = every rule's event function."""
+    a = args[0]
+    st = ccall(a[0][1], 0, t, x, a[2], args[1], a[2], a[1], p, g)
+    if st != 1:
+        _failed(args, GUARD, st, g)
+
+
+@numba.njit
+def jump(k, t, x, p, args):
+    """Apply rule ``k``'s jump map to ``x`` in place."""
+    a = args[0]
+    w = args[1]
+    st = ccall(a[0][2], k, t, x, a[2], w, a[2], a[1], p, x)
+    if st != 1:
+        _failed(args, JUMP, st, x)
+
+
+flow_call, guard_call, jump_call = flow, guard, jump
 
 
 @numba.njit(inline="always")
@@ -143,21 +188,20 @@ def tableau_constants(method: str) -> dict[str, object]:
     }
 
 
-def build(flow: Any, guard: Any, jump: Any, method: str, n: int, n_work: int) -> Any:
-    """Compile the kernel for one set of user functions and one method.
+def build(method: str) -> Any:
+    """Compile the kernel for one method (once per machine: the machine code is cached on disk).
 
-    The template runs with ``flow``, ``guard`` and ``jump`` as globals, so numba treats
-    them (and the tableau) as constants; its machine code is cached on disk when the
-    functions can be imported by name (see :mod:`etobs.hybrid._jitcache`).
+    The template runs with the method's tableau as constants, so numba folds the
+    coefficients (see :mod:`etobs.hybrid._jitcache`).
     """
     here = Path(__file__).parent
     namespace = _jitcache.build(
         f"kernel_{method}",
         _BODY,
-        {"N": int(n), "N_WORK": max(int(n_work), 1), **tableau_constants(method)},
-        {"flow": flow, "guard": guard, "jump": jump},
+        tableau_constants(method),
         {"jit": {}, "jit_nogil": {"nogil": True}},
-        depends=tuple(here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py")),
-        inline=True,
+        depends=tuple(
+            here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "../compile/ccall.py")
+        ),
     )
     return namespace["_kernel"]

@@ -1,13 +1,11 @@
 """Template of the compiled solver kernel; :func:`etobs.hybrid._kernel.build` runs it.
 
 Not imported as a module: ``build`` executes this text in a namespace that holds the
-user's ``flow``, ``guard`` and ``jump`` (inlined: ``flow`` in the stages and the
-dense-output stages, ``guard`` at the samples of every step; ``flow_call``,
-``guard_call`` and ``jump_call`` are the same functions, called, everywhere else: each
-inlined call site adds to the compile time), the decorators ``jit``/``jit_nogil`` and the method's tableau as
-constants (``TA, TB, TC, TE, TE3, TDA, TDC, TDD, N_STAGES,
-N_EXTRA, NQ, ERR_ORDER, DOP853``), so that numba inlines the user functions and folds
-the coefficients. The algorithm is documented in :mod:`etobs.hybrid._kernel`.
+decorators ``jit``/``jit_nogil`` and the method's tableau as constants (``TA, TB, TC,
+TE, TE3, TDA, TDC, TDD, N_STAGES, N_EXTRA, NQ, ERR_ORDER, DOP853``), so that numba
+folds the coefficients. The system's functions are called by address through
+``flow``, ``guard`` and ``jump`` of :mod:`etobs.hybrid._kernel`. The algorithm is
+documented there.
 """
 # ruff: noqa: F821
 
@@ -24,12 +22,14 @@ from etobs.hybrid._kernel import (
     I_KEEP_STEPS,
     I_MAX_JUMPS,
     I_MAX_STEPS,
+    I_N_WORK,
     I_SAMPLES,
     MAX_FACTOR,
     MAX_JUMPS,
     MAX_ROOT_ITER,
     MAX_STEPS,
     MIN_FACTOR,
+    MODEL_ERROR,
     NONFINITE,
     RUNNING,
     SAFETY,
@@ -38,6 +38,11 @@ from etobs.hybrid._kernel import (
     _any_nonneg,
     _dense_eval,
     _peak_probe,
+    flow,
+    flow_call,
+    guard,
+    guard_call,
+    jump_call,
 )
 
 
@@ -71,6 +76,7 @@ def _kernel(
     arc_t,
     arc_j,
     arc_x,
+    error_code,
 ):
     for r in range(runs.shape[0]):
         run = runs[r]
@@ -104,6 +110,7 @@ def _kernel(
             arc_t,
             arc_j,
             arc_x,
+            error_code,
         )
 
 
@@ -138,13 +145,14 @@ def _solve_one(
     arc_t,
     arc_j,
     arc_x,
+    error_code,
 ):
     rtol, atol = fopt[F_RTOL], fopt[F_ATOL]
     max_step, first_step, xtol_t = fopt[F_MAX_STEP], fopt[F_FIRST_STEP], fopt[F_XTOL]
     max_jumps, max_steps, S = iopt[I_MAX_JUMPS], iopt[I_MAX_STEPS], iopt[I_SAMPLES]
     dop853 = DOP853
     keep_steps = iopt[I_KEEP_STEPS] != 0
-    n = N
+    n = x_init.shape[0]
     s = N_STAGES  # stages without the FSAL one
     n_extra = N_EXTRA
     nq = NQ
@@ -152,8 +160,8 @@ def _solve_one(
     n_grid = grid.shape[0]
 
     buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x)
-    # the user's shared data travels with this run's own workspace
-    args = (args, np.empty(N_WORK))
+    # the system's shared data travels with this run's own workspace and failure flag
+    args = (args, np.zeros(iopt[I_N_WORK]), np.zeros(1, dtype=np.int64))
     K = np.empty((s + 1 + n_extra, n))
     Q = np.empty((nq, n))
     x = x_init.copy()
@@ -221,7 +229,7 @@ def _solve_one(
                 yi = x_new
             for q in range(n):
                 yi[q] = x[q] + hh * dy[q]
-            flow(ti, yi, p, args[0], args[1], K[i])
+            flow(ti, yi, p, args, K[i])
         # error norm (see Tableau.error_norm)
         _comb(TE, K, s + 1, dy)
         e5 = 0.0
@@ -264,7 +272,7 @@ def _solve_one(
             # ---- accepted step (see _FastSolver._accept) ----
             t_start = t
             t1 = t_end if last else t + hh
-            guard_call(t1, x_new, p, args[0], args[1], g1)
+            guard_call(t1, x_new, p, args, g1)
             have_q = m > 0 or n_grid > 0
             if have_q:
                 _dense_coeffs(args, p, t_start, x, x_new, K, hh, Q, y, dy)
@@ -302,6 +310,8 @@ def _solve_one(
                     st = COMPLETED
         if too_many and st == RUNNING:
             st = MAX_STEPS
+        if args[2][0] != 0:
+            st = MODEL_ERROR
 
     status[run] = st
     t_final[run] = t
@@ -311,6 +321,7 @@ def _solve_one(
     n_rejected[run] = rejected_n
     log_n[run] = nlog
     arc_n[run] = narc
+    error_code[run] = args[2][0]
 
 
 @jit
@@ -325,7 +336,9 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
     args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers = ctx
     log_rule, log_t, log_j = buffers[0], buffers[1], buffers[2]
     while m > 0:
-        guard_call(t, x, p, args[0], args[1], g)
+        guard_call(t, x, p, args, g)
+        if args[2][0] != 0:
+            return MODEL_ERROR, j, nlog, narc
         if not _any_nonneg(g):
             break
         for k in range(m):
@@ -333,7 +346,9 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
                 continue
             if j >= max_jumps:
                 return MAX_JUMPS, j, nlog, narc
-            jump_call(k, t, x, p, args[0], args[1])
+            jump_call(k, t, x, p, args)
+            if args[2][0] != 0:
+                return MODEL_ERROR, j, nlog, narc
             if nlog < log_cap:
                 log_rule[slot, nlog] = k
                 log_t[slot, nlog] = t
@@ -344,7 +359,9 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
                 narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
-    flow_call(t, x, p, args[0], args[1], f)
+    flow_call(t, x, p, args, f)
+    if args[2][0] != 0:
+        return MODEL_ERROR, j, nlog, narc
     if t >= t_end:
         return COMPLETED, j, nlog, narc
     if not _all_finite(f):
@@ -365,7 +382,7 @@ def _record_arc(buffers, slot, arc_cap, narc, t, j, x):
 @jit
 def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
     """Hairer, Nørsett & Wanner (1993), II.4 (as ``_FastSolver._initial_step``)."""
-    n = N
+    n = x.shape[0]
     remaining = t_end - t
     d0 = 0.0
     d1 = 0.0
@@ -382,7 +399,7 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
     h0 = min(h0, max(remaining, 1e-12))
     for q in range(n):
         y[q] = x[q] + h0 * f[q]
-    flow_call(t + h0, y, p, args[0], args[1], f1)
+    flow_call(t + h0, y, p, args, f1)
     d2 = 0.0
     for q in range(n):
         sc = atol + rtol * abs(x[q])
@@ -402,7 +419,7 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
 @jit
 def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
     """Coefficients of the continuous extension (see ``Tableau.dense``)."""
-    n = N
+    n = x.shape[0]
     if not DOP853:
         # Dormand--Prince 5(4): Q[k] = h * sum_i P[i, k] K[i]
         for k in range(NQ):
@@ -415,7 +432,7 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
         _comb(TDA[r], K, mm, dy)
         for q in range(n):
             y[q] = x[q] + h * dy[q]
-        flow(t + TDC[r] * h, y, p, args[0], args[1], K[mm])
+        flow(t + TDC[r] * h, y, p, args, K[mm])
     for q in range(n):
         d = x_new[q] - x[q]
         Q[0, q] = d
@@ -436,7 +453,7 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
     for i in range(1, S):
         th_s[ns] = i / S
         _dense_eval(Q, nq, dop853, x0, th_s[ns], xs)
-        guard(t0 + th_s[ns] * h, xs, p, args[0], args[1], gs[ns])
+        guard(t0 + th_s[ns] * h, xs, p, args, gs[ns])
         ns += 1
     th_s[ns] = 1.0
     for k in range(m):
@@ -455,7 +472,7 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
                     gs[i, k] = gs[i - 1, k]
             th_s[pos] = probe
             _dense_eval(Q, nq, dop853, x0, probe, xs)
-            guard_call(t0 + probe * h, xs, p, args[0], args[1], gs[pos])
+            guard_call(t0 + probe * h, xs, p, args, gs[pos])
             ns += 1
     # first sample with any g >= 0
     first = -1
@@ -501,7 +518,7 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
         if it % 2 == 0:
             width_before = w
         _dense_eval(Q, nq, dop853, x0, x, xs)
-        guard_call(t0 + x * h, xs, p, args[0], args[1], gtmp)
+        guard_call(t0 + x * h, xs, p, args, gtmp)
         fx = gtmp[k]
         if fx >= 0:
             if side == 1:
@@ -521,10 +538,11 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
 @jit
 def _comb(w, K, nstage, out):
     """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
-    for i in range(N):
+    n = out.shape[0]
+    for i in range(n):
         out[i] = 0.0
     for k in range(nstage):
         wk = w[k]
         if wk != 0.0:
-            for i in range(N):
+            for i in range(n):
                 out[i] += wk * K[k, i]

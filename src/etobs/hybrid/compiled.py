@@ -1,34 +1,21 @@
-"""The compiled backend: the fast solver's algorithm as a numba kernel, one run per thread.
+"""The engine: the solver's algorithm compiled with numba, one run per thread.
 
-Optional: it needs ``numba`` (``pip install 'etobs[numba]'``); nothing else in etobs
-imports numba. It solves a :class:`CompiledSystem`, whose flow, event and jump
-functions are numba-compiled functions of one run (not batched):
-
-``flow(t, x, p, args, work, dx)``
-    write ``x'`` into ``dx`` (shape ``(n,)``);
-``guard(t, x, p, args, work, g)``
-    write every rule's event function into ``g`` (shape ``(n_rules,)``); rule ``k``
-    jumps where ``g[k] >= 0``;
-``jump(k, t, x, p, args, work)``
-    apply rule ``k``'s jump map to ``x`` in place.
-
-``p`` is the run's own parameter vector (row of ``params``), so runs with different
-parameters share one compiled kernel; ``args`` is one value shared by all runs (a
-tuple of arrays, say; read it, do not write it); ``work`` is a scratch array of
-``n_work`` floats owned by the run, so that the functions need not allocate.
+It solves a :class:`CompiledSystem`: a hybrid system whose flow, guard and jump are C
+functions called by address (see :mod:`etobs.hybrid._kernel` for their contract), so
+the kernel is compiled once per machine and method and cached on disk, and a new
+system only compiles its own small functions (:mod:`etobs.compile`).
+:func:`compile_system` makes one from one-run Python functions; the estimation layer
+makes its own (:mod:`etobs.estimation.compiled`).
 
 The algorithm, options and results are those of :func:`etobs.hybrid.solve` (see the
-contract in :mod:`etobs.hybrid.solver`); the two agree to the integration tolerance
-(tests compare them and the scipy reference).
-
-Compilation happens once per process and per set of functions (a few seconds); the
-first call pays it.
+contract in :mod:`etobs.hybrid.solver`); tests compare the two and the scipy reference.
 """
 
 from __future__ import annotations
 
 import itertools
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
@@ -48,36 +35,9 @@ ARC_CAPACITY = 8192
 _BUFFER_BUDGET = 2**22  # entries in all runs' buffers together, first pass
 
 
-def numba_available() -> bool:
-    """Whether the optional dependency numba can be imported."""
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def require_numba(what: str = "the compiled backend") -> Any:
-    """Import numba or raise an :class:`InputError` that says how to install it."""
-    try:
-        import numba
-    except ImportError as exc:
-        raise InputError(
-            f"{what} needs the optional dependency numba, which is not installed; "
-            "install it with `pip install 'etobs[numba]'` or use backend='fast'"
-        ) from exc
-    return numba
-
-
-def is_compiled_function(fn: Any) -> bool:
-    """Whether ``fn`` is a numba-compiled (``@numba.njit``) function."""
-    numba = require_numba()
-    return isinstance(fn, numba.core.registry.CPUDispatcher)
-
-
 @dataclass(frozen=True)
 class CompiledSystem:
-    """A hybrid system given by numba-compiled functions of one run (module docstring).
+    """A hybrid system given by compiled C functions (module docstring).
 
     Parameters
     ----------
@@ -85,68 +45,115 @@ class CompiledSystem:
         State dimension.
     n_rules : int
         Number of jump rules.
-    flow, guard, jump : numba-compiled functions
+    addresses : tuple of int
+        Addresses of the flow, guard and jump C functions.
+    ia : ndarray of int64
+        Integer data passed to every call.
+    cf : ndarray of float64
+        Float data passed to every call.
     n_params : int
         Length of each run's parameter vector ``p``.
     n_work : int
-        Length of the scratch array ``work``.
-    args : object
-        Shared data passed to every call (anything numba accepts, e.g. a tuple of arrays).
+        Length of each run's scratch array.
     rule_names : tuple of str, optional
-
-    Examples
-    --------
-    The bouncing ball of :func:`etobs.hybrid.solve`, compiled; ``p[0]`` is the
-    restitution coefficient:
-
-    >>> import numba, numpy as np
-    >>> from etobs.hybrid.compiled import CompiledSystem, solve_compiled
-    >>> @numba.njit
-    ... def flow(t, x, p, args, work, dx):
-    ...     dx[0] = x[1]
-    ...     dx[1] = -9.81
-    >>> @numba.njit
-    ... def guard(t, x, p, args, work, g):
-    ...     g[0] = -x[0] if x[1] < 0 else -1.0
-    >>> @numba.njit
-    ... def jump(k, t, x, p, args, work):
-    ...     x[0] = 0.0
-    ...     x[1] = -p[0] * x[1]
-    >>> ball = CompiledSystem(n=2, n_rules=1, flow=flow, guard=guard, jump=jump, n_params=1)
-    >>> sol = solve_compiled(ball, [1.0, 0.0], (0.0, 1.0), params=[0.5])
-    >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
-    0.451524
+    function_names : tuple of str
+        Names of the functions by failure slot (slot ``s`` is ``function_names[s - 1]``),
+        for messages.
+    keep : object
+        What must stay alive for the addresses to stay valid (the compiled functions).
 
     """
 
     n: int
     n_rules: int
-    flow: Any
-    guard: Any
-    jump: Any
+    addresses: tuple[int, int, int]
+    ia: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
+    cf: np.ndarray = field(default_factory=lambda: np.zeros(1))
     n_params: int = 0
     n_work: int = 0
-    args: Any = ()
-    rule_names: tuple[str, ...] = field(default=())
+    rule_names: tuple[str, ...] = ()
+    function_names: tuple[str, ...] = ("flow", "guard", "jump")
+    keep: Any = None
 
     def __post_init__(self) -> None:
         v.integer("n", self.n, lower=1)
         v.integer("n_rules", self.n_rules, lower=0)
         v.integer("n_params", self.n_params, lower=0)
         v.integer("n_work", self.n_work, lower=0)
-        for name in ("flow", "guard", "jump"):
-            fn = getattr(self, name)
-            if not is_compiled_function(fn):
-                raise InputTypeError(
-                    f"`{name}` must be a numba-compiled function (decorated with @numba.njit); "
-                    f"got {type(fn).__name__}"
-                )
+        object.__setattr__(self, "ia", np.ascontiguousarray(np.r_[self.ia, 0], dtype=np.int64))
+        object.__setattr__(self, "cf", np.ascontiguousarray(np.r_[self.cf, 0.0], dtype=np.float64))
         if not self.rule_names:
             object.__setattr__(self, "rule_names", tuple(f"rule{k}" for k in range(self.n_rules)))
         elif len(self.rule_names) != self.n_rules:
             raise InputError(
                 f"`rule_names` has {len(self.rule_names)} names; expected n_rules={self.n_rules}"
             )
+
+    def failure(self, code: int) -> str:
+        """The failing function and how it failed, from a run's ``error_code``."""
+        from etobs.compile.functions import FAILURES
+
+        slot, how = divmod(int(code), 16)
+        names = self.function_names
+        name = names[slot - 1] if 0 < slot <= len(names) else f"function {slot}"
+        return f"`{name}` {FAILURES.get(how, f'failed ({how})')}"
+
+
+def compile_system(
+    flow: Callable[..., Any],
+    guard: Callable[..., Any],
+    jump: Callable[..., Any],
+    n: int,
+    n_rules: int,
+    *,
+    n_params: int = 0,
+    rule_names: tuple[str, ...] = (),
+) -> CompiledSystem:
+    """A :class:`CompiledSystem` from one-run Python functions.
+
+    ``flow(t, x) -> x'``, ``guard(t, x) -> g`` (shape ``(n_rules,)``) and
+    ``jump(k, t, x) -> x+``, on 1-D arrays; with ``n_params > 0`` each also takes the
+    run's parameter vector ``p`` last.
+
+    Examples
+    --------
+    The bouncing ball; ``p[0]`` is the restitution coefficient:
+
+    >>> import numpy as np
+    >>> ball = compile_system(
+    ...     lambda t, x, p: np.array([x[1], -9.81]),
+    ...     lambda t, x, p: np.array([-x[0] if x[1] < 0 else -1.0]),
+    ...     lambda k, t, x, p: np.array([0.0, -p[0] * x[1]]),
+    ...     n=2, n_rules=1, n_params=1)
+    >>> sol = solve_compiled(ball, [1.0, 0.0], (0.0, 1.0), params=[0.5])
+    >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
+    0.451524
+
+    """
+    from etobs.compile.functions import FunctionSpec, compile_function
+
+    n = v.integer("n", n, lower=1)
+    n_rules = v.integer("n_rules", n_rules, lower=0)
+    n_params = v.integer("n_params", n_params, lower=0)
+    fns = (
+        compile_function(flow, FunctionSpec("t, A0", (n,), n, n_params), "flow"),
+        compile_function(guard, FunctionSpec("t, A0", (n,), max(n_rules, 1), n_params), "guard")
+        if n_rules
+        else compile_function(_no_rules, FunctionSpec("t, A0", (n,), 1, 0), "guard"),
+        compile_function(jump, FunctionSpec("k, t, A0", (n,), n, n_params), "jump"),
+    )
+    return CompiledSystem(
+        n=n,
+        n_rules=n_rules,
+        addresses=tuple(f.address for f in fns),  # type: ignore[arg-type]
+        n_params=n_params,
+        rule_names=rule_names,
+        keep=fns,
+    )
+
+
+def _no_rules(t: float, x: np.ndarray) -> np.ndarray:
+    return np.full(1, -1.0)
 
 
 def solve_compiled(
@@ -179,7 +186,7 @@ def solve_compiled(
     Returns
     -------
     HybridSolution
-        With ``backend == "numba"``.
+        With ``backend == "engine"``.
 
     """
     if not isinstance(system, CompiledSystem):
@@ -225,7 +232,8 @@ def solve_compiled(
         n_steps=out.n_steps,
         n_rejected=out.n_rejected,
         rule_names=system.rule_names,
-        backend="numba",
+        backend="engine",
+        failures=tuple(system.failure(c) if c else "" for c in out.error_code),
     )
 
 
@@ -260,6 +268,7 @@ class _Buffers:
         self.arc_n = np.zeros(B, dtype=np.int64)
         self.grid_x = np.full((B, n_grid, n), np.nan)
         self.grid_j = np.full((B, n_grid), -1, dtype=np.int64)
+        self.error_code = np.zeros(B, dtype=np.int64)
 
 
 def _call(
@@ -282,7 +291,10 @@ def _call(
     fopt = np.array(
         [opts.rtol, opts.atol, opts.max_step, opts.first_step or 0.0, opts.event_xtol], dtype=float
     )
-    iopt = np.array([opts.max_jumps, opts.max_steps, opts.event_samples, int(keep_steps)], dtype=np.int64)
+    iopt = np.array(
+        [opts.max_jumps, opts.max_steps, opts.event_samples, int(keep_steps), system.n_work + 1],
+        dtype=np.int64,
+    )
     R = runs.shape[0]  # buffer row r belongs to run runs[r]
     log_rule = np.zeros((R, log_cap), dtype=np.int64)
     log_t = np.zeros((R, log_cap))
@@ -290,10 +302,10 @@ def _call(
     arc_t = np.zeros((R, arc_cap))
     arc_j = np.zeros((R, arc_cap), dtype=np.int64)
     arc_x = np.zeros((R, arc_cap, n))
-    kernel = _built(system, opts.method)
+    kernel = _built(opts.method)
     call = partial(
         kernel,
-        system.args,
+        (np.array(system.addresses, dtype=np.int64), system.ia, system.cf),
         x,
         P,
         system.n_rules,
@@ -322,6 +334,7 @@ def _call(
         arc_t,
         arc_j,
         arc_x,
+        out.error_code,
     )
     threads = _threads() if parallel else 1
     # Each thread solves a contiguous slice of ``runs``; the kernel releases the GIL.
@@ -333,7 +346,8 @@ def _call(
             rest[:7]
             + tuple(buf[a:b] for buf in rest[7:10])
             + rest[10:13]
-            + tuple(buf[a:b] for buf in rest[13:])
+            + tuple(buf[a:b] for buf in rest[13:16])
+            + rest[16:]
         )
         jobs.append((np.ascontiguousarray(runs[a:b], dtype=np.int64), views))
     if len(jobs) == 1:
@@ -344,26 +358,24 @@ def _call(
     return log_rule, log_t, log_j, arc_t, arc_j, arc_x
 
 
-_BUILT: dict[tuple[Any, ...], Any] = {}
+_BUILT: dict[str, Any] = {}
 _BUILD_LOCK = threading.Lock()
 
 
-def _built(system: CompiledSystem, method: str) -> Any:
-    """The kernel compiled for the system's functions (once per process, functions, method)."""
+def _built(method: str) -> Any:
+    """The kernel of ``method`` (compiled, or loaded from the disk cache, once per process)."""
     from etobs.hybrid import _kernel
 
-    fns = (system.flow, system.guard, system.jump)
-    key = (*(id(fn) for fn in fns), method, system.n, system.n_work)
     with _BUILD_LOCK:
-        if key not in _BUILT:
-            # The functions are kept with their kernel so that their ids are not reused.
-            _BUILT[key] = (_kernel.build(*fns, method, system.n, system.n_work), fns)
-        return _BUILT[key][0]
+        if method not in _BUILT:
+            _BUILT[method] = _kernel.build(method)
+        return _BUILT[method]
 
 
 def _threads() -> int:
     """Threads used for a parallel solve: numba's thread count (``NUMBA_NUM_THREADS``)."""
-    numba = require_numba()
+    import numba
+
     return int(numba.get_num_threads())
 
 

@@ -98,6 +98,9 @@ class HybridSolution:
         Accepted and rejected steps of each run.
     rule_names : tuple of str
     backend : str
+    failures : tuple of str
+        Per run, which model function failed and how (runs with status
+        ``model_error``), else ``""``.
 
     """
 
@@ -113,6 +116,7 @@ class HybridSolution:
     n_rejected: np.ndarray
     rule_names: tuple[str, ...]
     backend: str
+    failures: tuple[str, ...] = ()
 
     @property
     def n_runs(self) -> int:
@@ -126,7 +130,11 @@ class HybridSolution:
 
     def messages(self) -> list[str]:
         """One sentence per run saying how it ended and, on failure, how to fix it."""
-        return [status_message(Status(s), float(t)) for s, t in zip(self.status, self.t_final, strict=True)]
+        details = self.failures or ("",) * self.n_runs
+        return [
+            status_message(Status(s), float(t), d)
+            for s, t, d in zip(self.status, self.t_final, details, strict=True)
+        ]
 
     def status_labels(self) -> list[str]:
         """Status of each run as a lower-case label (``"completed"``, ``"max_jumps"``...)."""

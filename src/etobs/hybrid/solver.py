@@ -185,7 +185,7 @@ class _FastSolver:
             n_steps=self.n_steps,
             n_rejected=self.n_rejected,
             rule_names=self.sys.rule_names,
-            backend="fast",
+            backend="numpy",
         )
 
     def _refresh_flow(self, runs: np.ndarray) -> None:

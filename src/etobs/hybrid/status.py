@@ -18,6 +18,7 @@ class Status(enum.IntEnum):
     MAX_STEPS = 2
     NONFINITE = 3
     STEP_UNDERFLOW = 4
+    MODEL_ERROR = 5
 
     @property
     def label(self) -> str:
@@ -50,12 +51,21 @@ _MESSAGES = {
         "the step size fell below the floating-point resolution of t: the problem may be "
         "stiff or discontinuous along flows; loosen `rtol`/`atol` or check the model"
     ),
+    Status.MODEL_ERROR: (
+        "a model function failed: it raised an exception or returned an array of the wrong "
+        "shape; run the same problem with backend='scipy' to see the Python traceback"
+    ),
 }
 
 
-def status_message(status: Status, t: float | None = None) -> str:
-    """Return a sentence describing ``status`` (with the stopping time when given)."""
+def status_message(status: Status, t: float | None = None, detail: str = "") -> str:
+    """Return a sentence describing ``status`` (with the stopping time when given).
+
+    ``detail`` (e.g. which function failed) is put before the general explanation.
+    """
     text = _MESSAGES[Status(status)]
+    if detail:
+        text = f"{detail}; {text}"
     if t is not None and status != Status.COMPLETED:
         return f"stopped at t={t:.6g}: {text}"
     return text

@@ -1,0 +1,45 @@
+"""Writing a user function's result into the engine's output, for arrays and tuples alike.
+
+A one-run function may return a 1-D array or a tuple of floats; a tuple costs no
+allocation (numba keeps it in registers), which matters for a function called hundreds
+of thousands of times per run. :func:`store` copies either into ``out`` and returns
+``OK`` (1) or ``BAD_SHAPE`` (2) when the length is not ``n``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from numba.core import types
+from numba.extending import overload
+
+
+def store(r: Any, out: Any, n: int) -> int:
+    """Copy ``r`` (array or tuple) into ``out[:n]``; 1 when ``len(r) == n``, else 2."""
+    raise NotImplementedError("compiled only")  # pragma: no cover
+
+
+@overload(store)
+def _store(r: Any, out: Any, n: Any) -> Any:
+    if isinstance(r, types.Array):
+
+        def from_array(r: Any, out: Any, n: Any) -> Any:
+            if r.shape[0] != n:
+                return 2
+            for i in range(n):
+                out[i] = r[i]
+            return 1
+
+        return from_array
+    if isinstance(r, (types.UniTuple, types.Tuple)):
+        m = len(r)
+
+        def from_tuple(r: Any, out: Any, n: Any) -> Any:
+            if m != n:
+                return 2
+            for i in range(n):
+                out[i] = r[i]
+            return 1
+
+        return from_tuple
+    return None

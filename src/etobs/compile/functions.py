@@ -1,0 +1,220 @@
+"""Compile a user's one-run function into a C function the engine calls by address.
+
+A :class:`FunctionSpec` says how etobs calls a kind of function (``f_p(t, x, u, v)``,
+``h(x)``, a K-function ``fn(s)``, ...) and how long its result is. :func:`compile_function`
+compiles the user's function with numba (``error_model="numpy"``: ``1/0`` gives ``inf``,
+which the solver reports as ``nonfinite``, instead of raising), together with every
+Python function it calls, and wraps it in a C function of the one signature
+(:func:`c_signature`) that returns a status. A function may return a 1-D array or a
+tuple of floats (no allocation: the fastest form for functions called very often):
+
+* ``OK`` (1): the result was written to ``out``;
+* ``BAD_SHAPE`` (2): the function returned an array of another length;
+* ``RAISED`` (0): the function raised (numba prints the exception; the C wrapper
+  returns zero).
+
+The machine code is cached on disk under a hash of the function's content (see
+:mod:`etobs.compile.cache`): a new process, a sweep worker, or a function named as
+``"path/file.py:name"`` finds it again; editing one function recompiles only that one.
+"""
+
+from __future__ import annotations
+
+import threading
+import types
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+from etobs.compile.fingerprint import _names, fingerprint
+from etobs.errors import ModelError
+
+RAISED, OK, BAD_SHAPE = 0, 1, 2
+#: Failure codes as words, for messages.
+FAILURES = {RAISED: "raised an exception (numba printed it above)", BAD_SHAPE: "returned the wrong shape"}
+
+
+@dataclass(frozen=True)
+class FunctionSpec:
+    """How the engine calls one kind of user function.
+
+    Parameters
+    ----------
+    call : str
+        The call as Python text over ``k``, ``t``, ``A0`` .. ``A3`` (1-D arrays of
+        lengths ``sizes``) and ``P`` (the parameter vector), e.g. ``"t, A0, A1, A2"``.
+    sizes : tuple of int
+        Lengths of the arrays ``A0``, ``A1``, ... the call uses.
+    n_out : int
+        Length of the result; ``0`` means the function returns a float.
+    n_params : int
+        Length of ``P``; when positive, ``P`` is passed as the last argument.
+
+    """
+
+    call: str
+    sizes: tuple[int, ...]
+    n_out: int
+    n_params: int = 0
+
+    def source(self) -> str:
+        """Text of the C wrapper (module docstring); the user function is ``USER``."""
+        lines = ["def wrapper(k, t, a0, a1, a2, a3, ia, pp, outp):"]
+        for i, n in enumerate(self.sizes):
+            lines.append(f"    A{i} = carray(a{i}, ({n},))")
+        call = self.call
+        if self.n_params:
+            lines.append(f"    P = carray(pp, ({self.n_params},))")
+            call = f"{call}, P" if call else "P"
+        lines.append(f"    r = USER({call})")
+        if self.n_out == 0:
+            lines += ["    outp[0] = r", "    return 1"]
+        else:
+            lines += [f"    return store(r, carray(outp, ({self.n_out},)), {self.n_out})"]
+        return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class CompiledFunction:
+    """A compiled user function: its C function (kept alive here) and its address."""
+
+    name: str
+    address: int
+    cfunc: Any
+
+
+#: Version of the cached wrappers' layout (part of the cache key).
+_FORMAT = 3
+_MEMO: dict[str, CompiledFunction] = {}
+_LOCK = threading.Lock()
+
+
+def c_signature() -> Any:
+    """The numba signature of every C function the engine calls (see :mod:`etobs.compile.ccall`)."""
+    from numba import types as nt
+
+    f8p = nt.CPointer(nt.float64)
+    return nt.int64(nt.int64, nt.float64, f8p, f8p, f8p, f8p, nt.CPointer(nt.int64), f8p, f8p)
+
+
+def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction:
+    """Compile ``fn`` as described by ``spec`` (module docstring); memoized and cached on disk.
+
+    Parameters
+    ----------
+    fn : callable
+        The user's function (a plain Python function, a lambda, a closure or a numba
+        ``@njit`` function).
+    spec : FunctionSpec
+    name : str
+        How messages name the function, e.g. ``"f_p"`` or ``"gamma of node 0"``.
+
+    Raises
+    ------
+    ModelError
+        When numba cannot compile it: the message names the function, gives numba's
+        reason in one line and the way out.
+
+    """
+    import numba
+
+    from etobs.compile._store import store
+    from etobs.compile.cache import KEY, cache_dir, install_locator
+
+    source = spec.source()
+    key = fingerprint(fn) + "-" + _hash_text(f"{_FORMAT}{source}{numba.__version__}")
+    with _LOCK:
+        done = _MEMO.get(key)
+        if done is not None:
+            return CompiledFunction(name, done.address, done.cfunc)
+        install_locator()
+        cached = cache_dir() is not None
+        namespace: dict[str, Any] = {
+            "__name__": "etobs.compile._generated",
+            "USER": _jitted(fn, {}),
+            "carray": numba.carray,
+            "store": store,
+            KEY: key,
+        }
+        exec(compile(source, "<etobs wrapper>", "exec"), namespace)
+        try:
+            try:
+                cf = _cfunc(namespace["wrapper"], cached)
+            except Exception as exc:
+                if not cached:
+                    raise
+                # a cache entry that cannot be loaded (written by another version, say)
+                # must not stop the user: compile in memory and say so
+                cf = _cfunc(namespace["wrapper"], False)
+                warnings.warn(
+                    f"etobs: could not load the cached code of `{name}` ({_reason(exc)}); compiled it "
+                    "again. Deleting the cache folder (see etobs.compile.cache) is always safe",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+        except Exception as exc:  # numba raises many types; all mean "cannot compile"
+            raise ModelError(
+                f"`{name}` cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
+                "math on 1-D arrays (returning a 1-D array), or use backend='scipy', which runs any Python"
+            ) from exc
+        out = CompiledFunction(name, int(cf.address), cf)
+        _MEMO[key] = out
+        return out
+
+
+def _cfunc(wrapper: Any, cached: bool) -> Any:
+    import numba
+
+    with warnings.catch_warnings():
+        # numba's own warnings (performance hints, unsafe casts) are not the user's errors
+        warnings.simplefilter("ignore", numba.NumbaWarning)
+        return numba.cfunc(c_signature(), cache=cached, error_model="numpy")(wrapper)
+
+
+def _hash_text(text: str) -> str:
+    import hashlib
+
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _jitted(fn: Any, memo: dict[int, Any]) -> Any:
+    """``fn`` as a numba function, with the Python functions it calls compiled too."""
+    import numba
+
+    if hasattr(fn, "py_func"):
+        return fn
+    if not isinstance(fn, types.FunctionType):
+        return fn  # numba says what it cannot type
+    if id(fn) in memo:
+        return memo[id(fn)]
+
+    def convert(value: Any) -> Any:
+        return _jitted(value, memo) if isinstance(value, types.FunctionType) else value
+
+    glb = dict(fn.__globals__)
+    # numba imports a compiled function's module again when it loads it from the disk
+    # cache; the user's module may not be importable by name (a file loaded by path,
+    # __main__, a notebook), and the cached code does not depend on it
+    glb["__name__"] = "etobs.compile._generated"
+    for nm in _names(fn.__code__):
+        if nm in glb:
+            glb[nm] = convert(glb[nm])
+    cells = tuple(types.CellType(convert(c.cell_contents)) for c in fn.__closure__ or ())
+    clone = types.FunctionType(fn.__code__, glb, fn.__name__, fn.__defaults__, cells or None)
+    clone.__qualname__ = fn.__qualname__
+    out = numba.njit(error_model="numpy")(clone)
+    memo[id(fn)] = out
+    return out
+
+
+def _reason(exc: Exception) -> str:
+    """Numba's reason in one line (with the call it could not type, when it names one)."""
+    skip = ("Failed in nopython mode", "During:", "File ", "Traceback", "-", "^", "There are")
+    lines = [line.strip() for line in str(exc).splitlines()]
+    for k, text in enumerate(lines):
+        if text and not text.startswith(skip):
+            if text.endswith("signature:"):
+                call = next((t for t in lines[k + 1 :] if t.startswith(">>>")), "")
+                text = f"{text} {call.removeprefix('>>>').strip()}"
+            return text[:300].rstrip(".")
+    return type(exc).__name__
