@@ -1,5 +1,7 @@
 """Every input check names the argument, the expectation and what it received."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -103,9 +105,16 @@ def _node():
             r"`rule_names` has 1 names; expected n_rules=2",
         ),
         (
-            lambda: Custom(lambda s: s[:2]),
+            lambda: Custom(lambda s: np.array([s, s])),
             InputError,
-            r"`fn` must map an array of shape \(6,\) to finite values",
+            r"`fn` must map a float s >= 0 to a float \(written for one value, not an array\); "
+            r"at s in \[0.0, .*\] it raised TypeError",
+        ),
+        (
+            lambda: Custom(lambda s: s if s < 100.0 else math.inf),
+            InputError,
+            r"`fn` must give finite values; at s=\[0.0, 0.001, 0.1, 1.0, 10.0, 1000.0\] it gives "
+            r"\[0.0, 0.001, 0.1, 1.0, 10.0, inf\]",
         ),
         (
             lambda: transmission_counts(simulate(robot_arm(), [3, 2, 3, -2], 0.1), window=5.0),
@@ -139,13 +148,16 @@ def test_luenberger_and_custom_psi():
     res = simulate(pb, [1.0], 3.0, save=SaveAt(grid=[3.0]))
     assert len(res.transmissions) == 0
     assert res.on_grid().xhat[0, 0, 0] == pytest.approx(2 / 3 * (1 - np.exp(-9.0)), rel=1e-9)
+    # z = (unused, xhat): z1' = ybar - z1, z0' = 0, psi(z) = z1
     wide = Observer(
-        f_o=lambda t, z, u, ybar, yhat: np.concatenate([ybar - z[:, 1:], 0 * z[:, :1]], 1),
+        f_o=lambda t, z, u, ybar, yhat: np.concatenate((0.0 * z[:1], ybar - z[1:])),
         n_z=2,
-        psi=lambda z: z[:, 1:],
+        psi=lambda z: z[1:],
     )
-    res = simulate(EstimationProblem(_plant(), wide, [_node()]), [1.0], 0.5)
+    res = simulate(EstimationProblem(_plant(), wide, [_node()]), [1.0], 0.5, save=SaveAt(grid=[0.5]))
     assert res.arc(0).xhat.shape[-1] == 1
+    # ybar = 1 (no transmission), so xhat(t) = 1 - exp(-t)
+    assert res.on_grid().xhat[0, 0, 0] == pytest.approx(1 - np.exp(-0.5), rel=1e-9)
 
 
 def test_power_and_custom_with_inverse():

@@ -68,6 +68,15 @@ def vector(name: str, value: Any, size: int | None = None) -> np.ndarray:
     return arr
 
 
+def params(name: str, value: Any) -> np.ndarray:
+    """A model's parameter vector: ``None`` (no parameters) or a finite vector (read-only copy)."""
+    if value is None:
+        out = np.zeros(0)
+        out.setflags(write=False)
+        return out
+    return vector(name, value)
+
+
 def matrix(name: str, value: Any, shape: tuple[int | None, int | None]) -> np.ndarray:
     """Return a finite float matrix, checking each known dimension of ``shape``."""
     try:

@@ -23,12 +23,12 @@ A_CL = A - L @ C
 
 
 def plant() -> Plant:
-    return Plant(f_p=lambda t, x, u, v: x @ A.T + u @ B.T, h=lambda x: x @ C.T, n_x=2, n_y=1, n_u=1)
+    return Plant(f_p=lambda t, x, u, v: A @ x + B @ u, h=lambda x: C @ x, n_x=2, n_y=1, n_u=1)
 
 
 def observer() -> Observer:
     def f_o(t, z, u, ybar, yhat):
-        return z @ A.T + u @ B.T + (ybar - yhat) @ L.T
+        return A @ z + B @ u + L @ (ybar - yhat)
 
     return Observer(f_o=f_o, n_z=2)
 

@@ -1,77 +1,182 @@
-"""Estimation problems on the compiled backend: closed form, numpy solver, unsupported parts."""
+"""Estimation problems on the engine: closed forms, the numpy solver, the scipy reference,
+every rule, K-function and signal kind, and the choice of backend."""
+
+import math
+import re
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
-numba = pytest.importorskip("numba")
-
-from etobs import EstimationProblem, Node, Observer, Plant, simulate  # noqa: E402
-from etobs.errors import InputError  # noqa: E402
-from etobs.estimation import transmission_counts  # noqa: E402
-from etobs.examples import X0_PAPER, random_initial_states, robot_arm  # noqa: E402
-from etobs.hybrid import SaveAt  # noqa: E402
-from etobs.model import (  # noqa: E402
+from etobs import EstimationProblem, Node, Observer, Plant, simulate
+from etobs.errors import InputError, ModelError
+from etobs.estimation import transmission_counts
+from etobs.estimation.compiled import compile_problem
+from etobs.examples import L_PAPER, X0_PAPER, random_initial_states, robot_arm
+from etobs.hybrid import SaveAt, SolverOptions
+from etobs.model import (
+    Constant,
     Custom,
     DynamicRule,
-    JitObserver,
-    JitPlant,
+    FunctionSignal,
+    GeneralizedRule,
+    InputNode,
     Linear,
+    Link,
+    Network,
     PeriodicRule,
+    Power,
     Quadratic,
+    RelativeRule,
+    Sinusoid,
     StaticRule,
+    send_on_delta,
 )
 
-from . import scalar  # noqa: E402
+from . import linear, scalar
+
+TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)
 
 
-@numba.njit
-def slope_f_p(t, x, u, v, theta, out):
-    for i in range(x.shape[0]):
-        out[i] = theta[i]
-
-
-@numba.njit
-def identity_h(x, theta, out):
-    for i in range(x.shape[0]):
-        out[i] = x[i]
-
-
-@numba.njit
-def still_f_o(t, z, u, ybar, yhat, theta, out):
-    for i in range(z.shape[0]):
-        out[i] = 0.0
+# ---- small one-run problems ----------------------------------------------------------------
 
 
 def slopes(k, rules):
     """``x_i' = k_i``, ``y = x``, node i sends ``y_i`` with ``rules[i]``; observer at rest."""
     n = len(k)
     kk = np.asarray(k, dtype=float)
-    plant = Plant(
-        f_p=lambda t, x, u, v: np.broadcast_to(kk, x.shape).copy(),
-        h=lambda x: x,
-        n_x=n,
-        n_y=n,
-        jit=JitPlant(f_p=slope_f_p, h=identity_h, theta=kk),
-    )
-    observer = Observer(
-        f_o=lambda t, z, u, ybar, yhat: np.zeros_like(z), n_z=n, jit=JitObserver(f_o=still_f_o)
-    )
+    plant = Plant(f_p=lambda t, x, u, v: kk.copy(), h=lambda x: x.copy(), n_x=n, n_y=n)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(n), n_z=n)
     return EstimationProblem(
         plant=plant, observer=observer, nodes=[Node((i,), r) for i, r in enumerate(rules)]
     )
 
 
-def test_dynamic_rule_event_times_match_closed_form():
-    rule = DynamicRule(
-        gamma=Quadratic(scalar.ELL),
-        alpha=Linear(scalar.A),
-        sigma=scalar.SIGMA,
-        c=scalar.C,
-        b=scalar.B,
-        eps=scalar.EPS,
-        eta0=scalar.ETA0,
+def _oscillator(x, u, p):
+    """A damped oscillator driven by ``u``: a helper the model functions call."""
+    return np.array([x[1], -p[0] * x[0] - p[1] * x[1] + u[0]])
+
+
+L_OSC = np.array([[3.0, 0.5], [-0.5, 3.0]])
+
+
+def oscillator(rules, u=None, v=None, m=None):
+    """Two outputs ``y = x + m``, node i sends ``y_i``; plant numbers in ``params``."""
+    plant = Plant(
+        f_p=lambda t, x, u, v, p: _oscillator(x, u, p) + v,
+        h=lambda x, p: x.copy(),
+        n_x=2,
+        n_y=2,
+        n_u=1,
+        n_v=2,
+        params=[2.0, 0.3],
     )
-    res = simulate(slopes([scalar.K], [rule]), [0.0], 6.0, backend="numba")
+    observer = Observer(
+        f_o=lambda t, z, u, ybar, yhat: _oscillator(z, u, np.array([2.0, 0.3])) + L_OSC @ (ybar - yhat),
+        n_z=2,
+    )
+    nodes = [Node((i,), r, name=f"y{i}") for i, r in enumerate(rules)]
+    return EstimationProblem(plant=plant, observer=observer, nodes=nodes, u=u, v=v, m=m)
+
+
+SINE_U = Sinusoid(amplitude=[1.0], omega=1.0)
+
+CASES = {
+    "dynamic": (
+        [
+            DynamicRule(gamma=Quadratic(4.0), alpha=Linear(1.0), sigma=2.0, c=0.2, b=0.5, eps=0.01, eta0=0.1),
+            DynamicRule(gamma=Power(3.0, 1.5), alpha=Quadratic(2.0), sigma=1.0, c=0.1, eps=0.02, eta0=0.3),
+        ],
+        dict(u=SINE_U),
+    ),
+    "dynamic-custom": (
+        [
+            DynamicRule(
+                gamma=Custom(lambda s: 4.0 * s * s, name="4s^2"),
+                alpha=Custom(lambda s: s + s**3, name="s+s^3"),
+                sigma=2.0,
+                c=0.2,
+                eps=0.01,
+                eta0=0.1,
+            ),
+            DynamicRule(
+                gamma=Custom(lambda s: s * (1.0 + math.log1p(s))), alpha=Linear(2.0), sigma=0.5, eps=0.005
+            ),
+        ],
+        dict(u=Constant([0.5]), m=Sinusoid(amplitude=[0.01, 0.0], omega=5.0)),
+    ),
+    "static": (
+        [StaticRule(gamma=Linear(2.0), eps=0.05), StaticRule(gamma=Power(1.0, 2.0), eps=0.002)],
+        dict(u=Constant([0.5])),
+    ),
+    "send_on_delta": (
+        [send_on_delta(0.05), send_on_delta(0.03)],
+        dict(u=FunctionSignal(lambda t: np.array([np.cos(2.0 * t)]), 1), m=Constant([0.01, -0.02])),
+    ),
+    "periodic": (
+        [PeriodicRule(period=0.3, first=0.05), PeriodicRule(period=0.27)],
+        dict(u=SINE_U, v=Sinusoid(amplitude=[0.0, 0.1], omega=0.7, phase=0.2, offset=0.01)),
+    ),
+    "relative": (
+        [RelativeRule(rho=0.1, eps=0.02), RelativeRule(rho=0.2, eps=0.01)],
+        dict(
+            u=SINE_U,
+            v=FunctionSignal(lambda t: np.array([0.0, 0.05 * np.sin(3.0 * t)]), 2),
+            m=lambda t: np.array([0.01 * np.cos(t), 0.0]),  # a callable: wrapped as a FunctionSignal
+        ),
+    ),
+    "generalized": (
+        [
+            GeneralizedRule(
+                gamma=Quadratic(1.0),
+                gamma_check=Quadratic(0.5),
+                alpha_check=Linear(2.0),
+                d_prime=4.0,
+                sigma=0.5,
+                eps=0.01,
+                b=0.8,
+                eta0=0.1,
+            ),
+            GeneralizedRule(
+                gamma=Custom(lambda s: s * math.sqrt(s)),
+                gamma_check=Custom(lambda s: s * s + s),
+                alpha_check=Power(1.0, 1.2),
+                d_prime=Linear(2.0),
+                sigma=0.5,
+                eps=0.01,
+                eta0=0.2,
+            ),
+        ],
+        dict(u=SINE_U),
+    ),
+}
+X0_OSC = np.array([[1.0, -0.5], [0.3, 0.8]])
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_every_rule_function_and_signal_kind_matches_scipy_and_numpy(case):
+    rules, signals = CASES[case]
+    pb = oscillator(rules, **signals)
+    ours = simulate(pb, X0_OSC, 4.0, backend="engine")
+    sci = simulate(pb, X0_OSC, 4.0, backend="scipy", options=TIGHT)
+    num = simulate(pb, X0_OSC, 4.0, backend="numpy")
+    assert ours.backend == "engine" and sci.backend == "scipy" and num.backend == "numpy"
+    assert ours.ok and sci.ok and num.ok
+    counts = transmission_counts(ours)
+    assert np.all(counts >= 3), counts
+    for ref, atol in ((sci, 1e-6), (num, 1e-9)):
+        np.testing.assert_array_equal(counts, transmission_counts(ref))
+        assert ours.transmissions.rule.tolist() == ref.transmissions.rule.tolist()
+        np.testing.assert_allclose(ours.transmissions.t, ref.transmissions.t, rtol=0, atol=atol)
+    np.testing.assert_allclose(ours.solution.x_final, sci.solution.x_final, rtol=0, atol=1e-6)
+
+
+# ---- closed forms ----------------------------------------------------------------------
+
+
+def test_dynamic_rule_event_times_match_closed_form():
+    res = simulate(scalar.problem(), [0.0], 6.0, backend="engine")
+    assert res.backend == "engine" and res.backend_reason == "asked for"
     t = res.solution.jumps.times(0, 0)
     np.testing.assert_allclose(t[:6], scalar.event_times(6), rtol=0, atol=1e-9)
 
@@ -79,47 +184,146 @@ def test_dynamic_rule_event_times_match_closed_form():
 def test_static_and_periodic_rules_match_closed_form():
     # static: |e| = k tau reaches sqrt(eps/ell) every sqrt(eps/ell)/k; periodic: every period
     rules = [StaticRule(gamma=Quadratic(4.0), eps=1.0), PeriodicRule(period=0.3, first=0.1)]
-    res = simulate(slopes([2.0, 1.0], rules), [0.0, 0.0], 1.95, backend="numba")
+    res = simulate(slopes([2.0, 1.0], rules), [0.0, 0.0], 1.95, backend="engine")
     np.testing.assert_allclose(res.solution.jumps.times(0, 0), 0.25 * np.arange(1, 8), atol=1e-9)
     np.testing.assert_allclose(res.solution.jumps.times(0, 1), 0.1 + 0.3 * np.arange(7), atol=1e-9)
 
 
+# ---- the robot arm ----------------------------------------------------------------------
+
+
 @pytest.mark.parametrize("noise", [True, False])
-def test_robot_arm_matches_the_numpy_solver(noise):
+def test_robot_arm_engine_matches_numpy_and_scipy(noise):
     pb = robot_arm(noise=noise, disturbance=noise)
     x0 = np.vstack([X0_PAPER, random_initial_states(3, seed=7)])
     grid = np.linspace(20.0, 30.0, 201)
     save = SaveAt(steps=False, grid=grid)
-    ours = simulate(pb, x0, 30.0, backend="numba", save=save)
-    ref = simulate(pb, x0, 30.0, backend="fast", save=save)
+    ours = simulate(pb, x0, 30.0, backend="engine", save=save)
+    ref = simulate(pb, x0, 30.0, backend="numpy", save=save)
+    assert ours.backend == "engine" and ref.backend == "numpy"
     np.testing.assert_array_equal(transmission_counts(ours, (0, 30)), transmission_counts(ref, (0, 30)))
     np.testing.assert_array_equal(ours.solution.jumps.rule, ref.solution.jumps.rule)
     np.testing.assert_allclose(ours.solution.jumps.t, ref.solution.jumps.t, rtol=0, atol=1e-9)
     np.testing.assert_allclose(ours.solution.grid.x, ref.solution.grid.x, rtol=0, atol=1e-7)
     if noise:  # the paper's first simulation: 52 and 55 transmissions (docs/robot-arm.md)
         assert transmission_counts(ours, (0, 30))[0].tolist() == [52, 55]
+        sci = simulate(pb, X0_PAPER, 30.0, backend="scipy", options=TIGHT, save=save)
+        assert sci.backend == "scipy"
+        first = ours.transmissions.select(run=0)
+        assert transmission_counts(sci, (0, 30))[0].tolist() == [52, 55]
+        assert first.rule.tolist() == sci.transmissions.rule.tolist()
+        np.testing.assert_allclose(first.t, sci.transmissions.t, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(ours.solution.grid.x[0], sci.solution.grid.x[0], rtol=0, atol=1e-6)
 
 
-def test_unsupported_parts_are_named():
-    plain = scalar.problem()
-    with pytest.raises(InputError, match="needs compiled plant functions: give Plant\\(jit=JitPlant"):
-        simulate(plain, [0.0], 1.0, backend="numba")
-    pb = robot_arm()
-    custom = Node((0,), DynamicRule(gamma=Custom(lambda s: s**3, name="cube"), eps=1.0), name="cubic")
-    bad = EstimationProblem(pb.plant, pb.observer, (custom, pb.nodes[1]), u=pb.u, v=pb.v, m=pb.m)
-    with pytest.raises(InputError, match="gamma of node 'cubic' is a Custom"):
-        simulate(bad, X0_PAPER, 1.0, backend="numba")
-    fn_u = EstimationProblem(pb.plant, pb.observer, pb.nodes, u=lambda t: np.cos(t)[:, None], v=pb.v, m=pb.m)
-    with pytest.raises(InputError, match="signal `u` is a FunctionSignal"):
-        simulate(fn_u, X0_PAPER, 1.0, backend="numba")
-    with pytest.raises(InputError, match=r"`backend` must be one of \('fast', 'scipy', 'numba'\)"):
-        simulate(pb, X0_PAPER, 1.0, backend="jax")
+def test_another_observer_gain_compiles_nothing_new():
+    one = compile_problem(robot_arm())
+    two = compile_problem(robot_arm(L=2 * L_PAPER))
+    assert one.system.addresses == two.system.addresses
+    assert [f.address for f in one.system.keep] == [f.address for f in two.system.keep]
+    assert not np.array_equal(one.params, two.params)  # the gain travels in the parameters
+    a = simulate(robot_arm(), X0_PAPER, 5.0, backend="engine")
+    b = simulate(robot_arm(L=2 * L_PAPER), X0_PAPER, 5.0, backend="engine")
+    assert not np.array_equal(a.solution.x_final, b.solution.x_final)
 
 
-def test_jit_holders_are_validated():
-    from etobs.errors import InputTypeError
+# ---- failures ----------------------------------------------------------------------------
 
-    with pytest.raises(InputTypeError, match="`jit` must be a JitPlant; got dict"):
-        Plant(f_p=lambda t, x, u, v: x, h=lambda x: x, n_x=1, n_y=1, jit={})
-    with pytest.raises(InputError, match=r"`jit\.psi` must be given exactly when `psi` is"):
-        Observer(f_o=lambda *a: None, n_z=1, psi=lambda z: z, jit=JitObserver(f_o=still_f_o))
+
+class _Opaque:
+    def __call__(self, x):
+        return x
+
+
+def test_a_function_numba_cannot_compile_is_named_and_scipy_runs_it():
+    opaque = _Opaque()  # an arbitrary Python object
+    plant = Plant(f_p=lambda t, x, u, v: opaque(-x), h=lambda x: x.copy(), n_x=1, n_y=1)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: ybar - yhat, n_z=1)
+    pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
+    with pytest.raises(ModelError, match=r"^`f_p` cannot be compiled: .*backend='scipy'"):
+        simulate(pb, [1.0], 1.0, backend="engine")
+    res = simulate(pb, [1.0], 1.0, backend="scipy")
+    assert res.ok and len(res.transmissions) > 0
+
+
+def test_wrong_shape_during_a_run_is_a_model_error_naming_the_function():
+    def f_p(t, x, u, v):
+        if x[0] > 1.5:
+            return np.zeros(2)
+        return np.ones(1)
+
+    plant = Plant(f_p=f_p, h=lambda x: x.copy(), n_x=1, n_y=1)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(1), n_z=1)
+    pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
+    res = simulate(pb, [[1.0], [-5.0]], 1.0, backend="engine")
+    assert res.status_labels() == ["model_error", "completed"]
+    assert "`f_p` returned the wrong shape" in res.messages()[0]
+    assert res.solution.t_final[0] <= 0.5 + 1e-9  # x = 1 + t reaches 1.5 at t = 0.5
+
+
+# ---- choosing the backend ------------------------------------------------------------------
+
+
+def test_auto_picks_the_engine_for_the_base_setting():
+    res = simulate(robot_arm(), X0_PAPER, 1.0)
+    assert res.backend == "engine"
+    assert res.backend_reason == "auto: the engine models this problem"
+    assert simulate(robot_arm(), X0_PAPER, 1.0, backend="numba").backend == "engine"  # earlier name
+    assert simulate(robot_arm(), X0_PAPER, 1.0, backend="fast").backend == "numpy"  # earlier name
+
+
+EXTENSIONS = {
+    "input nodes": lambda rule: linear.problem(rule, input_nodes=[InputNode((0,), rule, name="u")]),
+    "network": lambda rule: linear.problem(rule, network=Network(Link(delay=0.01), seed=1)),
+    "hold='innovation'": lambda rule: linear.problem(rule, hold="innovation"),
+}
+
+
+@pytest.mark.parametrize("what", list(EXTENSIONS))
+def test_auto_picks_numpy_for_the_extensions_and_engine_refuses_them(what):
+    pb = EXTENSIONS[what](StaticRule(gamma=Linear(1.0), eps=0.05))
+    res = simulate(pb, [1.0, 0.0], 1.0)
+    assert res.backend == "numpy" and res.ok
+    assert res.backend_reason.startswith("auto: ") and what in res.backend_reason
+    assert "numpy" in res.backend_reason
+    with pytest.raises(InputError, match=r"^backend='engine': .*" + re.escape(what)):
+        simulate(pb, [1.0, 0.0], 1.0, backend="engine")
+
+
+def test_a_rule_of_your_own_runs_on_numpy():
+    from etobs.model.rules import StatelessRule
+
+    class Threshold(StatelessRule):
+        def trigger(self, t, e, s, y=None):
+            return np.abs(e[:, 0]) - 0.05
+
+    pb = linear.problem(Threshold())
+    res = simulate(pb, [1.0, 0.0], 1.0)
+    assert res.backend == "numpy" and "Threshold" in res.backend_reason
+    with pytest.raises(InputError, match="engine"):
+        simulate(pb, [1.0, 0.0], 1.0, backend="engine")
+    same = simulate(linear.problem(send_on_delta(0.05)), [1.0, 0.0], 1.0)
+    assert same.backend == "engine"
+    np.testing.assert_allclose(res.transmissions.t, same.transmissions.t, rtol=0, atol=1e-8)
+
+
+@dataclass(frozen=True)
+class _DoubledThreshold(StaticRule):
+    """A user's variant of a built-in rule: the threshold is twice ``eps``."""
+
+    def trigger(self, t, e, s, y=None):
+        return np.abs(e[:, 0]) - 2.0 * self.eps
+
+
+def test_a_subclass_of_a_built_in_rule_is_not_run_as_its_parent():
+    pb = linear.problem(_DoubledThreshold(gamma=Linear(1.0), eps=0.05))
+    auto = simulate(pb, [1.0, 0.0], 2.0)
+    ref = simulate(pb, [1.0, 0.0], 2.0, backend="numpy")
+    assert auto.backend == "numpy"
+    assert "_DoubledThreshold" in auto.backend_reason
+    np.testing.assert_array_equal(transmission_counts(auto), transmission_counts(ref))
+
+
+def test_unknown_backend_is_named():
+    with pytest.raises(InputError, match=r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\)"):
+        simulate(robot_arm(), X0_PAPER, 1.0, backend="jax")

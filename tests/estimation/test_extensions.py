@@ -96,10 +96,18 @@ def test_input_nodes_are_validated():
         InputNode((0,), 1.0)
 
 
-def test_numba_backend_refuses_the_extensions():
+@pytest.mark.parametrize("backend", ["engine", "numba"])  # "numba" is the engine's earlier name
+def test_engine_refuses_the_extensions_and_auto_falls_back_to_numpy(backend):
     pb = linear.problem(StaticRule(gamma=Linear(1.0), eps=0.1), hold="innovation")
-    with pytest.raises(InputError, match=r"base setting only; this problem uses hold='innovation'"):
-        simulate(pb, X0[:1], 1.0, backend="numba")
+    with pytest.raises(
+        InputError,
+        match=r"backend='engine': the engine models the base setting with etobs' rules; this problem uses "
+        r"hold='innovation' \(Remark 3\); use backend='numpy' or 'scipy'",
+    ):
+        simulate(pb, X0[:1], 1.0, backend=backend)
+    res = simulate(pb, X0[:1], 1.0, z0=Z0)
+    assert res.backend == "numpy"
+    assert "hold='innovation' (Remark 3)" in res.backend_reason
 
 
 # -- relative threshold -------------------------------------------------------------------
@@ -141,7 +149,8 @@ def test_observer_copy_holds_the_output_estimation_error_and_sends_less():
     times = rc.transmission_times(0, 0)
     rows = _jump_rows(a, times) + 1  # right after each send
     xhat = copy.psi(a.x[rows][:, copy.layout.z])
-    innov = copy.ytilde(a.t[rows], a.x[rows][:, copy.layout.x]) - copy.plant.h(xhat)
+    yhat = np.array([copy.plant.call_h(row) for row in xhat])  # h is written for one run
+    innov = copy.ytilde(a.t[rows], a.x[rows][:, copy.layout.x]) - yhat
     np.testing.assert_allclose(a.x[rows][:, copy.layout.ybar], innov, atol=1e-12)
     late_copy = transmission_counts(rc, window=(10, 20)).sum()
     late_base = transmission_counts(rb, window=(10, 20)).sum()
@@ -172,6 +181,7 @@ def test_rules_written_without_y_keep_working():
 
     res = simulate(linear.problem(Band()), X0[:1], 3.0, z0=Z0)
     assert res.ok and len(res.transmissions) > 5
+    assert res.backend == "numpy" and "a rule of your own" in res.backend_reason  # auto: no engine form
 
 
 def test_relative_rule_reads_the_measurement_also_with_the_observer_copy():
@@ -183,7 +193,7 @@ def test_relative_rule_reads_the_measurement_also_with_the_observer_copy():
     assert rows.size > 3
     x, z = a.x[rows][:, pb.layout.x], a.x[rows][:, pb.layout.z]
     y = pb.ytilde(a.t[rows], x)
-    innov = y - pb.plant.h(pb.psi(z))
+    innov = y - np.array([pb.plant.call_h(xhat) for xhat in pb.psi(z)])
     gap = a.x[rows][:, pb.layout.ybar] - innov
     np.testing.assert_allclose(np.abs(gap[:, 0]), 0.2 * np.abs(y[:, 0]) + 0.01, atol=1e-7)
 

@@ -24,7 +24,7 @@ def rule():
 
 
 def plant(n_x=3, n_y=3, **kw):
-    return Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x[:, :n_y], n_x=n_x, n_y=n_y, **kw)
+    return Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x[:n_y], n_x=n_x, n_y=n_y, **kw)
 
 
 def observer(n_z=3):
@@ -53,17 +53,38 @@ def test_nodes_must_partition_the_outputs(nodes, match):
 
 
 def test_shape_errors_name_the_function():
-    bad_f = Plant(f_p=lambda t, x, u, v: x[:, :2], h=lambda x: x, n_x=3, n_y=3)
+    # each function is called once, for one run, when the problem is built
+    bad_f = Plant(f_p=lambda t, x, u, v: x[:2], h=lambda x: x, n_x=3, n_y=3)
     with pytest.raises(
-        ModelError, match=r"`f_p` returned shape \(2, 2\) for a batch of 2 runs; expected \(2, n_x=3\)"
+        ModelError, match=r"`f_p` returned shape \(2,\) for one run; expected \(3,\) = \(n_x,\)$"
     ):
         EstimationProblem(bad_f, observer(), [Node((0, 1, 2), rule())])
-    bad_h = Plant(f_p=lambda t, x, u, v: x, h=lambda x: x[:, :1], n_x=3, n_y=3)
-    with pytest.raises(ModelError, match=r"`h` returned shape \(2, 1\) .* expected \(2, n_y=3\)"):
+    bad_h = Plant(f_p=lambda t, x, u, v: x, h=lambda x: x[:1], n_x=3, n_y=3)
+    with pytest.raises(
+        ModelError, match=r"`h` returned shape \(1,\) for one run; expected \(3,\) = \(n_y,\)"
+    ):
         EstimationProblem(bad_h, observer(), [Node((0, 1, 2), rule())])
-    bad_o = Observer(f_o=lambda t, z, u, ybar, yhat: z[:, :1], n_z=3)
-    with pytest.raises(ModelError, match=r"`f_o` returned shape \(2, 1\) .* expected \(2, n_z=3\)"):
+    bad_o = Observer(f_o=lambda t, z, u, ybar, yhat: z[:1], n_z=3)
+    with pytest.raises(
+        ModelError, match=r"`f_o` returned shape \(1,\) for one run; expected \(3,\) = \(n_z,\)"
+    ):
         EstimationProblem(plant(), bad_o, [Node((0, 1, 2), rule())])
+    bad_psi = Observer(f_o=lambda t, z, u, ybar, yhat: -z, n_z=4, psi=lambda z: z)
+    with pytest.raises(
+        ModelError, match=r"`psi` returned shape \(4,\) for one run; expected \(3,\) = \(n_x,\)"
+    ):
+        EstimationProblem(plant(), bad_psi, [Node((0, 1, 2), rule())])
+
+
+def test_a_function_written_for_a_batch_is_rejected_with_a_hint():
+    # the old convention (runs on axis 0): f_p gives (1, n_x) for x of shape (n_x,)
+    batched = Plant(f_p=lambda t, x, u, v: -np.atleast_2d(x), h=lambda x: x, n_x=3, n_y=3)
+    with pytest.raises(
+        ModelError,
+        match=r"`f_p` returned shape \(1, 3\) for one run; expected \(3,\) = \(n_x,\): functions are "
+        r"written for one run \(1-D arrays\), not a batch",
+    ):
+        EstimationProblem(batched, observer(), [Node((0, 1, 2), rule())])
 
 
 def test_other_problem_errors():
@@ -90,7 +111,11 @@ def test_other_problem_errors():
             r"`z0` has 3 runs but x0 has 2; give one row or 2 rows",
         ),
         ({"t_end": -1.0}, InputError, r"`t_end` must be >= t0 = 0; got -1"),
-        ({"backend": "rk4"}, InputError, r"`backend` must be one of \('fast', 'scipy', 'numba'\); got 'rk4'"),
+        (
+            {"backend": "rk4"},
+            InputError,
+            r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\); got 'rk4'",
+        ),
         ({"e0": [0.0]}, InputError, r"`e0` has shape \(1,\); expected \(2,\)"),
     ],
 )

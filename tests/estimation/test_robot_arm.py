@@ -17,24 +17,31 @@ def paper_run():
     return simulate(robot_arm(), X0_PAPER, T_END)
 
 
-def assert_backends_agree(fast, ref):
-    np.testing.assert_array_equal(transmission_counts(fast), transmission_counts(ref))
-    assert fast.transmissions.rule.tolist() == ref.transmissions.rule.tolist()
-    np.testing.assert_allclose(fast.transmissions.t, ref.transmissions.t, rtol=0, atol=1e-8)
+def assert_backends_agree(res, ref):
+    np.testing.assert_array_equal(transmission_counts(res), transmission_counts(ref))
+    assert res.transmissions.rule.tolist() == ref.transmissions.rule.tolist()
+    np.testing.assert_allclose(res.transmissions.t, ref.transmissions.t, rtol=0, atol=1e-8)
 
 
-def test_fast_solver_and_scipy_backend_agree_on_the_paper_run(paper_run):
+def test_engine_and_scipy_backend_agree_on_the_paper_run(paper_run):
     ref = simulate(robot_arm(), X0_PAPER, T_END, backend="scipy", options=TIGHT)
     assert ref.ok and paper_run.ok
+    assert (paper_run.backend, ref.backend) == ("engine", "scipy")  # "auto" takes the engine
     assert_backends_agree(paper_run, ref)
 
 
+def test_numpy_solver_agrees_with_the_engine_on_the_paper_run(paper_run):
+    res = simulate(robot_arm(), X0_PAPER, T_END, backend="numpy")
+    assert res.ok and res.backend == "numpy"
+    assert_backends_agree(res, paper_run)
+
+
 @pytest.mark.slow
-def test_fast_solver_and_scipy_backend_agree_on_random_runs():
+def test_engine_and_scipy_backend_agree_on_random_runs():
     x0 = random_initial_states(3, seed=2024)
-    fast = simulate(robot_arm(), x0, T_END)
+    res = simulate(robot_arm(), x0, T_END)
     ref = simulate(robot_arm(), x0, T_END, backend="scipy", options=TIGHT)
-    assert_backends_agree(fast, ref)
+    assert_backends_agree(res, ref)
 
 
 def test_minimum_inter_event_times_match_the_paper(paper_run):

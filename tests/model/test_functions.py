@@ -1,3 +1,5 @@
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -26,6 +28,27 @@ def test_values():
     s = np.array([0.0, 2.0])
     np.testing.assert_allclose(Linear(2.0)(s), [0.0, 4.0])
     np.testing.assert_allclose(Quadratic(5.0)(s), [0.0, 20.0])
+
+
+def test_custom_is_written_for_one_float_and_evaluated_elementwise():
+    f = Custom(lambda s: s * math.sqrt(s))  # fn maps a float to a float
+    s = np.array([[0.0, 1.0], [4.0, 9.0]])
+    out = f(s)
+    assert out.shape == (2, 2)
+    np.testing.assert_allclose(out, [[0.0, 1.0], [8.0, 27.0]])
+    assert as_kfunction("gamma", lambda s: 2.0 * s)(np.array([3.0])).tolist() == [6.0]
+
+
+def test_custom_written_for_arrays_gets_the_one_value_message():
+    with pytest.raises(
+        InputError, match=r"`fn` must map a float s >= 0 to a float \(written for one value.*TypeError"
+    ):
+        Custom(lambda s: s[:2])
+
+
+def test_custom_that_raises_on_the_probe_names_the_error():
+    with pytest.raises(InputError, match=r"raised ZeroDivisionError"):
+        Custom(lambda s: 1 / s)
 
 
 @pytest.mark.parametrize(

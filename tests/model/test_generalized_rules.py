@@ -11,8 +11,9 @@ from etobs.model import DynamicRule, GeneralizedRule, send_on_delta
 
 
 def scalar_problem(rule, m=None):
-    plant = Plant(f_p=lambda t, x, u, v: np.sin(t)[:, None] + 0 * x, h=lambda x: x, n_x=1, n_y=1)
-    obs = luenberger(lambda t, x, u: np.sin(t)[:, None] + 0 * x, [[2.0]])
+    # x' = sin t, y = x, written for one run (t a float, x of shape (1,))
+    plant = Plant(f_p=lambda t, x, u, v: np.sin(t) + 0.0 * x, h=lambda x: x, n_x=1, n_y=1)
+    obs = luenberger(lambda t, x, u: np.sin(t) + 0.0 * x, [[2.0]])
     return EstimationProblem(plant=plant, observer=obs, nodes=(Node(outputs=(0,), rule=rule),), m=m)
 
 

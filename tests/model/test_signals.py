@@ -18,14 +18,18 @@ def test_as_signal():
     c = as_signal("u", [1.0, 2.0], 2)
     assert isinstance(c, Constant)
     np.testing.assert_allclose(c(np.zeros(3)), [[1, 2]] * 3)
-    f = as_signal("u", lambda t: np.stack([t, t], 1), 2)
-    np.testing.assert_allclose(f(np.array([1.0])), [[1, 1]])
+    f = as_signal("u", lambda t: np.array([t, 2.0 * t]), 2)  # one time t (a float) -> (dim,)
+    assert isinstance(f, FunctionSignal)
+    np.testing.assert_allclose(f(np.array([1.0, 3.0])), [[1, 2], [3, 6]])  # a time vector -> (B, dim)
 
 
 def test_bad_signals():
     with pytest.raises(InputError, match=r"`m` has dimension 3; expected 2"):
         as_signal("m", [1.0, 2.0, 3.0], 2)
     with pytest.raises(
-        ModelError, match=r"signal function returned shape \(2,\) for t of shape \(2,\); expected \(2, 1\)"
+        ModelError,
+        match=r"signal function `fn` returned shape \(\) for t = 0.0; expected \(1,\): write it for one time t",
     ):
         FunctionSignal(lambda t: t, 1)
+    with pytest.raises(ModelError, match=r"returned shape \(3,\) for t = 0.0; expected \(2,\)"):
+        as_signal("u", lambda t: np.array([t, t, t]), 2)

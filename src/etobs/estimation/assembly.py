@@ -32,6 +32,7 @@ from etobs.model.network import Link, PacketStream
 from etobs.model.rules import TriggerRule
 
 if TYPE_CHECKING:
+    from etobs.estimation.calls import ModelCalls
     from etobs.estimation.problem import EstimationProblem
 
 #: Arrival time of an empty packet slot (finite: the solver rejects non-finite states).
@@ -73,14 +74,15 @@ def slot_columns(ch: Channel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return base, base + 1, base[:, None] + 2 + np.arange(ch.size)[None, :]
 
 
-def build_system(pb: EstimationProblem) -> HybridSystem:
+def build_system(pb: EstimationProblem, calls: ModelCalls) -> HybridSystem:
     """The problem as a :class:`~etobs.hybrid.HybridSystem` (eq. (16)--(22))."""
-    return _Assembly(pb).system()
+    return _Assembly(pb, calls).system()
 
 
 class _Assembly:
-    def __init__(self, pb: EstimationProblem) -> None:
+    def __init__(self, pb: EstimationProblem, calls: ModelCalls) -> None:
         self.pb = pb
+        self.calls = calls
         self.lay = pb.layout
         self.channels: tuple[Channel, ...] = pb.layout.channels
         self.innovation = pb.hold == "innovation"
@@ -94,9 +96,9 @@ class _Assembly:
     ) -> tuple[np.ndarray, ...]:
         pb, lay = self.pb, self.lay
         x = q[:, lay.x]
-        yt = pb.ytilde(t, x)
+        yt = self.calls.h(x) + pb.m(t)  # eq. (46)
         u = pb.u(t) if need_u else np.empty((t.shape[0], 0))  # the guard reads u only for input nodes
-        yhat = pb.plant.h(pb.psi(q[:, lay.z])) if need_yhat else yt
+        yhat = self.calls.h(self.calls.psi(q[:, lay.z])) if need_yhat else yt
         return yt, u, yhat
 
     def _source(
@@ -127,7 +129,7 @@ class _Assembly:
         x, z = q[:, lay.x], q[:, lay.z]
         yt, u, yhat = self._parts(t, q, need_yhat=True)
         out = np.zeros_like(q)
-        out[:, lay.x] = pb.plant.f_p(t, x, u, pb.v(t))  # eq. (2)
+        out[:, lay.x] = self.calls.f_p(t, x, u, pb.v(t))  # eq. (2)
         ubar = u
         if self.u_held:  # eq. (50): the observer runs on the held input
             ubar = u.copy()
@@ -136,7 +138,7 @@ class _Assembly:
         ybar = q[:, lay.ybar]
         if self.innovation:  # Remark 3: the observer holds ytilde - yhat as sent
             ybar = yhat + ybar
-        out[:, lay.z] = pb.observer.f_o(t, z, ubar, ybar, yhat)  # eq. (7)
+        out[:, lay.z] = self.calls.f_o(t, z, ubar, ybar, yhat)  # eq. (7)
         for ch in self.channels:
             if ch.rule_state.stop > ch.rule_state.start:
                 sig, meas = self._source(ch, yt, u, yhat)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import itertools
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
 from etobs.model.signals import Signal, Sinusoid, as_signal
+
+if TYPE_CHECKING:
+    from etobs.estimation.calls import ModelCalls
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,7 @@ class EstimationProblem:
     hold: str = "output"
     network: Network | None = None
     layout: StateLayout = field(init=False, repr=False)
+    _calls: dict[bool, Any] = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.plant, Plant):
@@ -130,6 +134,14 @@ class EstimationProblem:
         _check_shapes(self)
         _check_noise(self)
 
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_calls"] = {}  # compiled functions stay in their process
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+
     @property
     def n_nodes(self) -> int:
         """Number of sensor nodes ``N``."""
@@ -150,16 +162,37 @@ class EstimationProblem:
         """Whether the problem uses an extension the compiled backend does not model."""
         return bool(self.input_nodes) or self.hold != "output" or self.network is not None
 
+    def calls(self, compiled: bool | None = None) -> ModelCalls:
+        """The model functions on batches of runs (:class:`~etobs.estimation.calls.ModelCalls`).
+
+        ``compiled=None`` compiles them when numba can and calls the Python functions
+        otherwise (for evaluating results); ``False`` always calls the Python functions.
+        """
+        from etobs.errors import ModelError
+        from etobs.estimation.calls import ModelCalls
+
+        key = compiled is not False
+        if key not in self._calls:
+            if compiled is None:
+                try:
+                    self._calls[True] = ModelCalls(self, compiled=True)
+                except ModelError:
+                    self._calls[True] = self.calls(False)
+            else:
+                self._calls[key] = ModelCalls(self, compiled=key)
+        return self._calls[key]
+
     def psi(self, z: np.ndarray) -> np.ndarray:
-        """State estimate ``xhat = psi(z)``."""
+        """State estimate ``xhat = psi(z)`` of a batch, shape ``(..., n_z)`` to ``(..., n_x)``."""
         if self.observer.psi is None:
             return z[..., : self.plant.n_x]
-        return self.observer.psi(z)
+        flat = z.reshape(-1, z.shape[-1])
+        return self.calls().psi(flat).reshape(*z.shape[:-1], self.plant.n_x)
 
     def ytilde(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46))."""
+        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46)) of a batch."""
         m: Signal = self.m
-        return self.plant.h(x) + m(t)
+        return self.calls().h(x) + m(t)
 
     def initial_state(
         self, x0: np.ndarray, z0: np.ndarray, e0: np.ndarray, t0: float, run_ids: np.ndarray | None = None
@@ -182,7 +215,7 @@ class EstimationProblem:
         q[:, lay.z] = z0
         ybar = self.ytilde(tt, x0) + e0
         if self.hold == "innovation":
-            ybar = ybar - self.plant.h(self.psi(z0))
+            ybar = ybar - self.calls().h(self.psi(z0))
         q[:, lay.ybar] = ybar
         u0 = self.u(tt)
         for ch in lay.channels:
@@ -196,15 +229,16 @@ class EstimationProblem:
             q[:, lay.run] = np.arange(b) if run_ids is None else run_ids
         return q
 
-    def hybrid_system(self) -> HybridSystem:
-        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.HybridSystem`.
+    def hybrid_system(self, compiled: bool = True) -> HybridSystem:
+        """The hybrid model (16)--(22) as a batched :class:`~etobs.hybrid.HybridSystem`.
 
         Jump rules ``0 .. C-1`` are the nodes' transmissions (output nodes, then input
-        nodes); with a network, rules ``C .. 2C-1`` deliver their packets.
+        nodes); with a network, rules ``C .. 2C-1`` deliver their packets. The model
+        functions are compiled (``compiled=True``) or the user's Python functions.
         """
         from etobs.estimation.assembly import build_system
 
-        return build_system(self)
+        return build_system(self, self.calls(compiled))
 
 
 def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:
@@ -308,23 +342,30 @@ def _layout(
 
 
 def _check_shapes(pb: EstimationProblem) -> None:
-    """Call every model function once on a batch of two runs and check the shapes."""
+    """Call every model function once, for one run, and check what it returns."""
     p, o = pb.plant, pb.observer
-    b = 2
-    t = np.zeros(b)
-    x, z = np.zeros((b, p.n_x)), np.zeros((b, o.n_z))
-    u, v = pb.u(t), pb.v(t)
+    t0 = np.zeros(1)
+    x, z = np.zeros(p.n_x), np.zeros(o.n_z)
+    u, v = pb.u(t0)[0], pb.v(t0)[0]
 
-    def check(name: str, out: Any, shape: tuple[int, int], what: str) -> np.ndarray:
-        arr = np.asarray(out)
-        if arr.shape != shape:
-            raise ModelError(f"`{name}` returned shape {arr.shape} for a batch of {b} runs; expected {what}")
+    def check(name: str, out: Any, n: int, what: str) -> np.ndarray:
+        try:
+            arr = np.asarray(out, dtype=float)
+        except (TypeError, ValueError):
+            arr = np.asarray(out, dtype=object)
+        if arr.shape != (n,):
+            hint = ""
+            if arr.ndim == 2:
+                hint = ": functions are written for one run (1-D arrays), not a batch"
+            raise ModelError(
+                f"`{name}` returned shape {arr.shape} for one run; expected ({n},) = ({what},){hint}"
+            )
         return arr
 
-    check("f_p", p.f_p(t, x, u, v), (b, p.n_x), f"({b}, n_x={p.n_x})")
-    y = check("h", p.h(x), (b, p.n_y), f"({b}, n_y={p.n_y})")
-    xhat = check("psi", pb.psi(z), (b, p.n_x), f"({b}, n_x={p.n_x})")
-    check("f_o", o.f_o(t, z, u, y, p.h(xhat)), (b, o.n_z), f"({b}, n_z={o.n_z})")
+    check("f_p", p.call_f_p(0.0, x, u, v), p.n_x, "n_x")
+    y = check("h", p.call_h(x), p.n_y, "n_y")
+    xhat = check("psi", o.call_psi(z, p.n_x), p.n_x, "n_x")
+    check("f_o", o.call_f_o(0.0, z, u, y, p.call_h(xhat)), o.n_z, "n_z")
 
 
 def _check_noise(pb: EstimationProblem) -> None:

@@ -57,6 +57,12 @@ class EstimationResult:
 
     problem: EstimationProblem
     solution: HybridSolution
+    backend_reason: str = ""
+
+    @property
+    def backend(self) -> str:
+        """The solver that ran: ``"engine"``, ``"numpy"`` or ``"scipy"`` (why: ``backend_reason``)."""
+        return self.solution.backend
 
     @property
     def n_runs(self) -> int:
@@ -167,7 +173,7 @@ class EstimationResult:
             e = ybar - pb.ytilde(tf, x)
             xhat = pb.psi(z)
             if pb.hold == "innovation":  # ybar holds ytilde - yhat as sent (Remark 3)
-                e = e + pb.plant.h(xhat)
+                e = e + pb.calls().h(xhat)
         eta = np.full((flat.shape[0], pb.n_channels), np.nan)
         for i, sl in enumerate(lay.rule):
             if sl.stop > sl.start:

@@ -14,7 +14,9 @@ from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solver import solve
 
-BACKENDS = ("fast", "scipy", "numba")
+BACKENDS = ("auto", "engine", "numpy", "scipy")
+#: Earlier names of two backends, still accepted.
+ALIASES = {"numba": "engine", "fast": "numpy"}
 
 
 def simulate(
@@ -27,7 +29,7 @@ def simulate(
     t0: float = 0.0,
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
-    backend: str = "fast",
+    backend: str = "auto",
     run_ids: Any = None,
 ) -> EstimationResult:
     """Simulate the event-triggered observer (eq. (16)--(22)) from one or many initial states.
@@ -49,10 +51,16 @@ def simulate(
         Solver settings (tolerances, jump limit, event sampling).
     save : SaveAt, optional
         What to keep: full arcs (default) and/or states on a time grid.
-    backend : {"fast", "scipy", "numba"}
-        The batched numpy solver; the ``solve_ivp`` reference used for cross-checks; or
-        the compiled solver (optional numba; needs the plant's and observer's ``jit``
-        functions, see :mod:`etobs.estimation.compiled`), the fastest for many runs.
+    backend : {"auto", "engine", "numpy", "scipy"}
+        ``"engine"``: the compiled solver (:mod:`etobs.estimation.compiled`), one run per
+        thread, with the model's functions compiled; ``"numpy"``: the batched numpy
+        solver (it runs the extensions the engine does not model yet: input nodes, the
+        observer-copy hold, networks, rules of your own); ``"scipy"``: the
+        ``solve_ivp`` reference, which calls your Python functions as they are (any
+        Python). ``"auto"`` (default) is the engine when it models the problem and
+        ``"numpy"`` otherwise; the result's ``backend`` and ``backend_reason`` say which
+        and why. ``"numba"`` and ``"fast"`` are earlier names of ``"engine"`` and
+        ``"numpy"``.
     run_ids : array_like of int, shape (B,), optional
         With a network: the index of each run in its random streams (default
         ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
@@ -72,8 +80,10 @@ def simulate(
     """
     if not isinstance(problem, EstimationProblem):
         raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
+    backend = ALIASES.get(backend, backend) if isinstance(backend, str) else backend
     if backend not in BACKENDS:
         raise InputError(f"`backend` must be one of {BACKENDS}; got {backend!r}")
+    backend, reason = choose_backend(problem, backend)
     p, o = problem.plant, problem.observer
     t0 = v.real("t0", t0)
     t_end = v.real("t_end", t_end)
@@ -89,16 +99,31 @@ def simulate(
         if ids.shape != (B,) or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
             raise InputError(f"`run_ids` must be {B} non-negative integers (one per run); got {run_ids!r}")
     q0 = problem.initial_state(X0, Z0, E0, t0, ids)
-    if backend == "numba":
+    if backend == "engine":
         from etobs.estimation.compiled import compile_problem
         from etobs.hybrid.compiled import solve_compiled
 
         cp = compile_problem(problem)
         sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=save)
+    elif backend == "numpy":
+        sol = solve(problem.hybrid_system(compiled=True), q0, (t0, t_end), options=options, save=save)
     else:
-        solver = solve if backend == "fast" else solve_reference
-        sol = solver(problem.hybrid_system(), q0, (t0, t_end), options=options, save=save)
-    return EstimationResult(problem=problem, solution=sol)
+        sol = solve_reference(
+            problem.hybrid_system(compiled=False), q0, (t0, t_end), options=options, save=save
+        )
+    return EstimationResult(problem=problem, solution=sol, backend_reason=reason)
+
+
+def choose_backend(problem: EstimationProblem, backend: str = "auto") -> tuple[str, str]:
+    """The backend ``simulate`` uses for ``problem``, and why (the one place ``"auto"`` is decided)."""
+    if backend != "auto":
+        return backend, "asked for"
+    from etobs.estimation.compiled import engine_support
+
+    why = engine_support(problem)
+    if why:
+        return "numpy", f"auto: {why}, so the batched numpy solver runs it"
+    return "engine", "auto: the engine models this problem"
 
 
 def _broadcast(name: str, value: Any, n: int, B: int) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.estimation.problem import EstimationProblem
-from etobs.model import DynamicRule, JitObserver, JitPlant, Linear, Node, Observer, Plant, Quadratic, Sinusoid
+from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sinusoid
 
 A = np.array(
     [
@@ -40,20 +40,18 @@ for _arr in (A, B, G, C, L_PAPER):
     _arr.setflags(write=False)
 
 
-def _matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Rows of ``x @ M.T`` as elementwise multiply-adds in a fixed order.
+def _model(x: np.ndarray, u: float) -> tuple[float, float, float, float]:
+    """``A x + B u + G*3.3*sin(x_3)`` for one arm (the model part of eq. (57)).
 
-    A BLAS product may sum in an order that depends on the batch size; this keeps each
-    run's result bit-for-bit independent of the other runs it is batched with.
+    A tuple, not an array: it costs no allocation, and these functions run hundreds of
+    thousands of times per run.
     """
-    out = x[:, :1] * M[:, 0]
-    for k in range(1, M.shape[1]):
-        out += x[:, k : k + 1] * M[:, k]
-    return out
-
-
-def _model(t: np.ndarray, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return _matvec(A, x) + u * B + (SECTOR * np.sin(x[:, 2]))[:, None] * G
+    return (
+        x[1],
+        A[1, 0] * x[0] + A[1, 1] * x[1] + A[1, 2] * x[2] + B[1] * u,
+        x[3],
+        A[3, 0] * x[0] + A[3, 2] * x[2] - SECTOR * np.sin(x[2]),
+    )
 
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
@@ -96,16 +94,9 @@ def robot_arm(
     amp_v = 0.02 * np.array([0.0, 1.0, 0.0, 1.0]) if disturbance else np.zeros(4)
     amp_m = 0.01 * np.array([0.0, 1.0]) if noise else np.zeros(2)
 
-    def f_p(t: np.ndarray, x: np.ndarray, u: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        return _model(t, x, u) + dist
-
-    def f_o(t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-        # eq. (57) run on the held outputs: xhat' = A xhat + B u + G σ(H xhat) + L (ybar - C xhat)
-        return _model(t, z, u) + _matvec(gain, ybar - yhat)
-
-    jit_plant, jit_observer = _jit(gain)
-    plant = Plant(f_p=f_p, h=lambda x: x[:, :2], n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm", jit=jit_plant)
-    observer = Observer(f_o=f_o, n_z=4, name="polytopic Luenberger", jit=jit_observer)
+    plant = Plant(f_p=_plant, h=_output, n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
+    # the gain travels as the observer's parameters: another L compiles nothing
+    observer = Observer(f_o=_observer, n_z=4, name="polytopic Luenberger", params=gain.ravel())
     params = {
         k: _pair(k, val) for k, val in dict(sigma=sigma, c=c, b=b, a=a, ell=ell, eps=eps, eta0=eta0).items()
     }
@@ -135,15 +126,33 @@ def robot_arm(
     )
 
 
-def _jit(gain: np.ndarray) -> tuple[JitPlant | None, JitObserver | None]:
-    """Compiled versions of the model for ``backend="numba"`` (when numba is installed)."""
-    from etobs.hybrid.compiled import numba_available
+def _plant(t: float, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[float, ...]:
+    """Plant ``x' = A x + B u + G*3.3*sin(x_3) + v`` (section 8)."""
+    m = _model(x, u[0])
+    return (m[0] + v[0], m[1] + v[1], m[2] + v[2], m[3] + v[3])
 
-    if not numba_available():
-        return None, None
-    from etobs.examples import _robot_arm_jit as jit
 
-    return JitPlant(f_p=jit.f_p, h=jit.h), JitObserver(f_o=jit.f_o, theta=gain.ravel())
+def _output(x: np.ndarray) -> np.ndarray:
+    """``y = (x_1, x_2)``."""
+    return x[:2]
+
+
+def _observer(
+    t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray, p: np.ndarray
+) -> tuple[float, ...]:
+    """Observer (57) on the held outputs; ``p`` is the gain ``L`` (4 x 2) row by row.
+
+    ``xhat' = A xhat + B u + G σ(H xhat) + L (ybar - C xhat)``.
+    """
+    r0 = ybar[0] - yhat[0]
+    r1 = ybar[1] - yhat[1]
+    m = _model(z, u[0])
+    return (
+        m[0] + p[0] * r0 + p[1] * r1,
+        m[1] + p[2] * r0 + p[3] * r1,
+        m[2] + p[4] * r0 + p[5] * r1,
+        m[3] + p[6] * r0 + p[7] * r1,
+    )
 
 
 def random_initial_states(n: int, seed: int | np.random.Generator | None = 0) -> np.ndarray:
@@ -172,33 +181,36 @@ def robot_arm_network(n_arms: int, **rule: Any) -> EstimationProblem:
     """
     n_arms = v.integer("n_arms", n_arms, lower=1)
     one = robot_arm(**rule)
-    blocks = [slice(4 * k, 4 * k + 4) for k in range(n_arms)]
-    outs = np.array([i for k in range(n_arms) for i in (4 * k, 4 * k + 1)])
     amp_v = np.tile(one.v.amplitude, n_arms)
     amp_m = np.tile(one.m.amplitude, n_arms)
 
-    def f_p(t: np.ndarray, x: np.ndarray, u: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        return np.concatenate([one.plant.f_p(t, x[:, b], u, dist[:, b]) for b in blocks], axis=1)
+    def f_p(t: float, x: np.ndarray, u: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        out = np.empty(4 * n_arms)
+        for k in range(n_arms):
+            r = _plant(t, x[4 * k : 4 * k + 4], u, dist[4 * k : 4 * k + 4])
+            for i in range(4):
+                out[4 * k + i] = r[i]
+        return out
 
-    def f_o(t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-        parts = [
-            one.observer.f_o(t, z[:, b], u, ybar[:, 2 * k : 2 * k + 2], yhat[:, 2 * k : 2 * k + 2])
-            for k, b in enumerate(blocks)
-        ]
-        return np.concatenate(parts, axis=1)
+    def h(x: np.ndarray) -> np.ndarray:
+        out = np.empty(2 * n_arms)
+        for k in range(n_arms):
+            out[2 * k : 2 * k + 2] = x[4 * k : 4 * k + 2]
+        return out
+
+    def f_o(
+        t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray, p: np.ndarray
+    ) -> np.ndarray:
+        out = np.empty(4 * n_arms)
+        for k in range(n_arms):
+            r = _observer(t, z[4 * k : 4 * k + 4], u, ybar[2 * k : 2 * k + 2], yhat[2 * k : 2 * k + 2], p)
+            for i in range(4):
+                out[4 * k + i] = r[i]
+        return out
 
     n = 4 * n_arms
-    plant = Plant(
-        f_p=f_p,
-        h=lambda x: x[:, outs],
-        n_x=n,
-        n_y=2 * n_arms,
-        n_u=1,
-        n_v=n,
-        name="robot arms",
-        jit=one.plant.jit,
-    )
-    observer = Observer(f_o=f_o, n_z=n, name="polytopic Luenberger (per arm)", jit=one.observer.jit)
+    plant = Plant(f_p=f_p, h=h, n_x=n, n_y=2 * n_arms, n_u=1, n_v=n, name="robot arms")
+    observer = Observer(f_o=f_o, n_z=n, name="polytopic Luenberger (per arm)", params=one.observer.params)
     nodes = tuple(
         Node(outputs=(2 * k + i,), rule=one.nodes[i].rule, name=f"arm {k + 1} sensor {i + 1}")
         for k in range(n_arms)

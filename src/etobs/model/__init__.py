@@ -14,8 +14,8 @@ from etobs.model.network import (
     UniformDelay,
 )
 from etobs.model.node import InputNode, Node
-from etobs.model.observer import JitObserver, Observer, luenberger
-from etobs.model.plant import JitPlant, Plant
+from etobs.model.observer import Observer, luenberger
+from etobs.model.plant import Plant
 from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
@@ -30,8 +30,6 @@ __all__ = [
     "GeneralizedRule",
     "GilbertElliottLoss",
     "InputNode",
-    "JitObserver",
-    "JitPlant",
     "KFunction",
     "Linear",
     "Link",

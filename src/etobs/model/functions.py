@@ -2,7 +2,9 @@
 
 All act elementwise on arrays of non-negative reals. ``Linear(a)`` is ``a*s`` and
 ``Quadratic(ell)`` is ``ell*s**2`` (the paper's ``𝔩_i s^2``); :class:`Custom` wraps any
-user function after a sanity check that it is zero at zero and increasing.
+user function of one float after a sanity check that it is zero at zero and increasing.
+Each knows its engine form (:meth:`KFunction.engine_form`): a kind code and two numbers,
+or the user's function to compile.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError
 
+#: Kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+LINEAR, QUADRATIC, POWER, CUSTOM, CONSTANT = 0, 1, 2, 3, 4
+
 
 class KFunction(ABC):
     """A class-K∞ function ``[0, ∞) → [0, ∞)``: continuous, zero at zero, increasing, unbounded."""
@@ -27,6 +32,10 @@ class KFunction(ABC):
     @abstractmethod
     def inverse(self, r: np.ndarray) -> np.ndarray:
         """Evaluate the inverse function elementwise."""
+
+    @abstractmethod
+    def engine_form(self) -> tuple[int, float, float, Callable[[float], float] | None]:
+        """``(kind, k1, k2, fn)``: the kind code, its two numbers, the function to compile or None."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +52,9 @@ class Linear(KFunction):
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.asarray(r) / self.a
+
+    def engine_form(self) -> tuple[int, float, float, None]:
+        return LINEAR, self.a, 0.0, None
 
     def __str__(self) -> str:
         return f"{self.a:g}*s"
@@ -62,6 +74,9 @@ class Quadratic(KFunction):
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.sqrt(np.asarray(r) / self.ell)
+
+    def engine_form(self) -> tuple[int, float, float, None]:
+        return QUADRATIC, self.ell, 0.0, None
 
     def __str__(self) -> str:
         return f"{self.ell:g}*s^2"
@@ -84,6 +99,9 @@ class Power(KFunction):
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.power(np.asarray(r) / self.k, 1.0 / self.p)
 
+    def engine_form(self) -> tuple[int, float, float, None]:
+        return POWER, self.k, self.p, None
+
     def __str__(self) -> str:
         return f"{self.k:g}*s^{self.p:g}"
 
@@ -93,16 +111,23 @@ _PROBE = np.array([0.0, 1e-3, 0.1, 1.0, 10.0, 1e3])
 
 @dataclass(frozen=True)
 class Custom(KFunction):
-    """A user class-K∞ function.
+    """A user class-K∞ function of one float.
 
     Parameters
     ----------
     fn : callable
-        Vectorized ``fn(s) -> r``.
+        ``fn(s) -> r`` for a float ``s >= 0`` (numpy or ``math``; etobs compiles it).
     inv : callable, optional
-        Its inverse; when absent, :meth:`inverse` solves ``fn(s) = r`` numerically.
+        Its inverse, float to float; when absent, :meth:`inverse` solves ``fn(s) = r``
+        numerically.
     name : str
         Shown in reports.
+
+    Examples
+    --------
+    >>> import math
+    >>> Custom(lambda s: s * math.sqrt(s))(np.array([4.0])).tolist()
+    [8.0]
 
     """
 
@@ -114,12 +139,15 @@ class Custom(KFunction):
         v.function("fn", self.fn)
         if self.inv is not None:
             v.function("inv", self.inv)
-        vals = np.asarray(self.fn(_PROBE), dtype=float)
-        if vals.shape != _PROBE.shape or not np.all(np.isfinite(vals)):
+        try:
+            vals = np.array([float(self.fn(float(s))) for s in _PROBE])
+        except Exception as exc:  # the user's function: any error means the same to them
             raise InputError(
-                f"`fn` must map an array of shape {_PROBE.shape} to finite values of the same shape; "
-                f"got {vals!r}"
-            )
+                f"`fn` must map a float s >= 0 to a float (written for one value, not an array); "
+                f"at s in {_PROBE.tolist()} it raised {type(exc).__name__}: {exc}"
+            ) from exc
+        if not np.all(np.isfinite(vals)):
+            raise InputError(f"`fn` must give finite values; at s={_PROBE.tolist()} it gives {vals.tolist()}")
         if vals[0] != 0.0 or np.any(np.diff(vals) <= 0):
             raise InputError(
                 f"`fn` must be a class-K∞ function (zero at 0, increasing); at s={_PROBE.tolist()} "
@@ -127,20 +155,25 @@ class Custom(KFunction):
             )
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
-        return self.fn(s)
+        arr = np.asarray(s, dtype=float)
+        return np.array([float(self.fn(float(x))) for x in arr.reshape(-1)]).reshape(arr.shape)
+
+    def engine_form(self) -> tuple[int, float, float, Callable[[float], float]]:
+        return CUSTOM, 0.0, 0.0, self.fn
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         if self.inv is not None:
-            return self.inv(r)
+            arr = np.asarray(r, dtype=float)
+            return np.array([float(self.inv(float(x))) for x in arr.reshape(-1)]).reshape(arr.shape)
         from scipy.optimize import brentq
 
         def one(ri: float) -> float:
             if ri <= 0:
                 return 0.0
             hi = 1.0
-            while float(self.fn(np.array(hi))) < ri:
+            while float(self.fn(hi)) < ri and hi < 1e300:
                 hi *= 2.0
-            return brentq(lambda s: float(self.fn(np.array(s))) - ri, 0.0, hi, xtol=1e-14)
+            return brentq(lambda s: float(self.fn(s)) - ri, 0.0, hi, xtol=1e-14)
 
         return np.vectorize(one, otypes=[float])(np.asarray(r, dtype=float))
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.model.functions import KFunction, Linear, as_kfunction
-from etobs.model.rules import EtaRule, _norm
+from etobs.model.rules import GENERALIZED, EngineForm, EtaRule, _norm
 
 
 @dataclass(frozen=True)
@@ -96,3 +96,9 @@ class GeneralizedRule(EtaRule):
         eta, r = s[:, 0], _norm(e)
         w = self.weight(eta)
         return self.gamma(r) + w * self.gamma_check(r) - self.sigma * w * self.alpha_check(eta) - self.eps
+
+    def engine_form(self) -> EngineForm:
+        numbers = {"sigma": self.sigma, "b": self.b, "eps": self.eps}
+        return EngineForm(
+            GENERALIZED, numbers, (self.gamma, self.alpha_check, self.gamma_check, self.d_prime)
+        )

@@ -2,7 +2,7 @@
 
 For ``x_1' = x_2, ..., x_{n-1}' = x_n, x_n' = phi(t, x, u)`` with ``y = x_1`` (a chain of
 integrators with a nonlinearity in the last equation), the observer
-``xhat' = f(t, xhat, u) + L (ybar - xhat_1)`` with
+``xhat' = f(t, xhat, u) + L (ybar - xhat_1)`` (``f`` written for one run) with
 ``L = (theta k_1, theta^2 k_2, ..., theta^n k_n)`` has error dynamics
 ``theta``-times faster than those of the Hurwitz companion matrix of ``k``; for
 ``theta`` large enough (globally Lipschitz ``phi``) it satisfies Assumption 1 with
@@ -45,12 +45,24 @@ def high_gain_gain(n_x: int, theta: float, k: Any = None) -> np.ndarray:
 
 
 def high_gain_observer(
-    f: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    f: Callable[[float, np.ndarray, np.ndarray], np.ndarray],
     n_x: int,
     theta: float,
     *,
     k: Any = None,
     name: str = "high-gain",
 ) -> Observer:
-    """The high-gain observer of the module docstring (``z = xhat``, output ``y = x_1``)."""
+    """The high-gain observer of the module docstring (``z = xhat``, output ``y = x_1``).
+
+    ``f(t, x, u) -> (n_x,)`` is the model for one run (1-D arrays, numpy or ``math``);
+    the observer's ``f_o(t, z, u, ybar, yhat) = f(t, z, u) + L (ybar - yhat)`` calls it
+    and etobs compiles both.
+
+    Examples
+    --------
+    >>> obs = high_gain_observer(lambda t, x, u: np.array([x[1], -x[0]]), 2, 10.0)
+    >>> obs.call_f_o(0.0, np.zeros(2), np.zeros(0), np.array([1.0]), np.array([0.0])).tolist()
+    [20.0, 100.0]
+
+    """
     return luenberger(f, high_gain_gain(n_x, theta, k), name=name)

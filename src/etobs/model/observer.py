@@ -1,4 +1,4 @@
-"""The observer ``z' = f_o(t, z, u, ybar, yhat)``, ``xhat = psi(z)`` (eq. (3), (7))."""
+"""The observer ``z' = f_o(t, z, u, ybar, yhat)``, ``xhat = psi(z)`` (eq. (3), (7)), for one run."""
 
 from __future__ import annotations
 
@@ -9,90 +9,84 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.errors import InputError, InputTypeError
 
-ObserverFn = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class JitObserver:
-    """The observer's functions for one run, compiled with numba (for ``backend="numba"``).
-
-    Parameters
-    ----------
-    f_o : numba-compiled function
-        ``f_o(t, z, u, ybar, yhat, theta, out)`` writes ``z'`` (shape ``(n_z,)``) into ``out``.
-    psi : numba-compiled function, optional
-        ``psi(z, theta, out)`` writes ``xhat`` (shape ``(n_x,)``); required when the
-        observer has ``psi``.
-    theta : array_like, optional
-        Parameters passed to both (e.g. the gain ``L`` flattened), so that changing them
-        does not recompile.
-
-    """
-
-    f_o: Any
-    psi: Any = None
-    theta: Any = ()
-
-    def __post_init__(self) -> None:
-        v.function("f_o", self.f_o)
-        if self.psi is not None:
-            v.function("psi", self.psi)
-        object.__setattr__(self, "theta", np.array(self.theta, dtype=float).reshape(-1))
+ObserverFn = Callable[..., np.ndarray]
 
 
 @dataclass(frozen=True)
 class Observer:
-    """A continuous-time observer, run on the held outputs ``ybar``.
+    """A continuous-time observer, run on the held outputs ``ybar``, written for one run.
 
     Parameters
     ----------
     f_o : callable
-        ``f_o(t, z, u, ybar, yhat) -> z'``, all arrays with the batch on axis 0.
+        ``f_o(t, z, u, ybar, yhat) -> z'`` on 1-D arrays (``z`` of shape ``(n_z,)``);
+        numpy or ``math``, compiled by etobs.
     n_z : int
         Observer state dimension (``>= n_x``; an EKF carries its covariance in ``z``).
     psi : callable, optional
-        ``psi(z) -> xhat`` of shape ``(B, n_x)``; default: the first ``n_x`` entries.
+        ``psi(z) -> xhat`` of shape ``(n_x,)``; default: the first ``n_x`` entries.
     name : str
+    params : array_like, optional
+        A parameter vector: when given, ``f_o`` and ``psi`` take it as their last
+        argument (``f_o(t, z, u, ybar, yhat, p)``, ``psi(z, p)``); numbers kept here
+        change without a recompile.
 
     """
 
     f_o: ObserverFn
     n_z: int
-    psi: Callable[[np.ndarray], np.ndarray] | None = None
+    psi: Callable[..., np.ndarray] | None = None
     name: str = "observer"
-    jit: JitObserver | None = None
+    params: Any = None
 
     def __post_init__(self) -> None:
         v.function("f_o", self.f_o)
         v.integer("n_z", self.n_z, lower=1)
         if self.psi is not None:
             v.function("psi", self.psi)
-        if self.jit is not None:
-            if not isinstance(self.jit, JitObserver):
-                raise InputTypeError(f"`jit` must be a JitObserver; got {type(self.jit).__name__}")
-            if (self.jit.psi is None) != (self.psi is None):
-                raise InputError("`jit.psi` must be given exactly when `psi` is (both or neither)")
+        object.__setattr__(self, "params", v.params("params", self.params))
+
+    def call_f_o(
+        self, t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray
+    ) -> np.ndarray:
+        """``f_o`` of one run, with ``params`` when there are any."""
+        if self.params.size:
+            return self.f_o(t, z, u, ybar, yhat, self.params)
+        return self.f_o(t, z, u, ybar, yhat)
+
+    def call_psi(self, z: np.ndarray, n_x: int) -> np.ndarray:
+        """``xhat = psi(z)`` of one run (the first ``n_x`` entries of ``z`` without ``psi``)."""
+        if self.psi is None:
+            return z[:n_x]
+        if self.params.size:
+            return self.psi(z, self.params)
+        return self.psi(z)
 
 
-def luenberger(
-    f: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray], L: Any, *, name: str = "luenberger"
-) -> Observer:
+def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger") -> Observer:
     """Luenberger observer ``xhat' = f(t, xhat, u) + L (ybar - yhat)`` with ``z = xhat``.
 
     Parameters
     ----------
     f : callable
-        Model vector field ``f(t, x, u) -> (B, n_x)`` (the plant without disturbance).
+        Model vector field ``f(t, x, u) -> (n_x,)`` for one run (the plant without
+        disturbance).
     L : array_like, shape (n_x, n_y)
         Observer gain.
 
+    Examples
+    --------
+    >>> import numpy as np
+    >>> obs = luenberger(lambda t, x, u: -x, L=[[2.0], [0.0]])
+    >>> obs.call_f_o(0.0, np.ones(2), np.zeros(0), np.array([3.0]), np.array([1.0])).tolist()
+    [3.0, -1.0]
+
     """
     v.function("f", f)
-    gain = v.matrix("L", L, (None, None))
+    gain = np.ascontiguousarray(v.matrix("L", L, (None, None)))
 
-    def f_o(t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-        return f(t, z, u) + (ybar - yhat) @ gain.T
+    def f_o(t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
+        return f(t, z, u) + gain @ (ybar - yhat)
 
     return Observer(f_o=f_o, n_z=gain.shape[0], name=name)

@@ -1,4 +1,4 @@
-"""The plant ``x' = f_p(t, x, u, v)``, ``y = h(x)`` (eq. (2))."""
+"""The plant ``x' = f_p(t, x, u, v)``, ``y = h(x)`` (eq. (2)), written for one run."""
 
 from __future__ import annotations
 
@@ -9,56 +9,40 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.errors import InputTypeError
 
-PlantFn = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-OutputFn = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class JitPlant:
-    """The plant's functions for one run, compiled with numba (for ``backend="numba"``).
-
-    Parameters
-    ----------
-    f_p : numba-compiled function
-        ``f_p(t, x, u, v, theta, out)`` writes ``x'`` (shape ``(n_x,)``) into ``out``.
-    h : numba-compiled function
-        ``h(x, theta, out)`` writes ``y`` (shape ``(n_y,)``) into ``out``.
-    theta : array_like, optional
-        Parameters passed to both (so that changing them does not recompile).
-
-    """
-
-    f_p: Any
-    h: Any
-    theta: Any = ()
-
-    def __post_init__(self) -> None:
-        v.function("f_p", self.f_p)
-        v.function("h", self.h)
-        object.__setattr__(self, "theta", np.array(self.theta, dtype=float).reshape(-1))
+PlantFn = Callable[..., np.ndarray]
+OutputFn = Callable[..., np.ndarray]
 
 
 @dataclass(frozen=True)
 class Plant:
-    """A nonlinear plant, vectorized over runs.
+    """A nonlinear plant, written for one run (as for ``scipy.integrate.solve_ivp``).
 
     Parameters
     ----------
     f_p : callable
-        ``f_p(t, x, u, v) -> x'`` with ``t`` of shape ``(B,)``, ``x`` ``(B, n_x)``,
-        ``u`` ``(B, n_u)``, ``v`` ``(B, n_v)``; returns ``(B, n_x)``.
+        ``f_p(t, x, u, v) -> x'``: ``t`` a float, ``x`` of shape ``(n_x,)``, ``u`` of
+        shape ``(n_u,)``, ``v`` of shape ``(n_v,)``; returns shape ``(n_x,)``. Write it
+        with numpy or ``math``: etobs compiles it (and every function it calls).
     h : callable
-        ``h(x) -> y`` of shape ``(B, n_y)``; continuously differentiable.
+        ``h(x) -> y`` of shape ``(n_y,)``; continuously differentiable.
     n_x, n_y : int
         State and output dimensions (``>= 1``).
     n_u, n_v : int
         Known input and unknown disturbance dimensions (``>= 0``).
     name : str
-    jit : JitPlant, optional
-        numba-compiled single-run versions of ``f_p`` and ``h`` for the compiled
-        backend (``simulate(..., backend="numba")``).
+    params : array_like, optional
+        A parameter vector, as python-control's ``params``: when given, ``f_p`` and
+        ``h`` take it as their last argument (``f_p(t, x, u, v, p)``, ``h(x, p)``).
+        Numbers kept here, not in the functions' code, change without a recompile.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> vdp = Plant(lambda t, x, u, v, p: np.array([x[1], p[0] * (1 - x[0] ** 2) * x[1] - x[0]]),
+    ...             lambda x, p: x[:1], n_x=2, n_y=1, params=[1.0])
+    >>> vdp.call_f_p(0.0, np.array([2.0, 0.0]), np.zeros(0), np.zeros(0)).tolist()
+    [0.0, -2.0]
 
     """
 
@@ -69,7 +53,7 @@ class Plant:
     n_u: int = 0
     n_v: int = 0
     name: str = "plant"
-    jit: JitPlant | None = None
+    params: Any = None
 
     def __post_init__(self) -> None:
         v.function("f_p", self.f_p)
@@ -78,5 +62,16 @@ class Plant:
         v.integer("n_y", self.n_y, lower=1)
         v.integer("n_u", self.n_u, lower=0)
         v.integer("n_v", self.n_v, lower=0)
-        if self.jit is not None and not isinstance(self.jit, JitPlant):
-            raise InputTypeError(f"`jit` must be a JitPlant; got {type(self.jit).__name__}")
+        object.__setattr__(self, "params", v.params("params", self.params))
+
+    def call_f_p(self, t: float, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``f_p`` of one run, with ``params`` when there are any."""
+        if self.params.size:
+            return self.f_p(t, x, u, v, self.params)
+        return self.f_p(t, x, u, v)
+
+    def call_h(self, x: np.ndarray) -> np.ndarray:
+        """``h`` of one run, with ``params`` when there are any."""
+        if self.params.size:
+            return self.h(x, self.params)
+        return self.h(x)

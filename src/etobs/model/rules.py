@@ -20,13 +20,30 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
 from etobs.model.functions import KFunction, Linear, as_kfunction
+
+#: Rule kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+DYNAMIC, STATIC, PERIODIC, RELATIVE, GENERALIZED = 0, 1, 2, 3, 4
+
+
+@dataclass(frozen=True)
+class EngineForm:
+    """A rule as the engine runs it: its kind, its numbers and its K-functions.
+
+    ``numbers`` maps ``sigma, c, b, eps, rho, period`` to values (those the kind uses);
+    ``kfunctions`` are the slots ``(gamma, alpha, gamma_check, d')``, ``None`` when unused,
+    a :class:`~etobs.model.functions.KFunction` or a constant.
+    """
+
+    kind: int
+    numbers: dict[str, float]
+    kfunctions: tuple[Any, Any, Any, Any] = (None, None, None, None)
 
 
 def _norm(e: np.ndarray) -> np.ndarray:
@@ -67,6 +84,22 @@ class TriggerRule(ABC):
     @abstractmethod
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Internal state right after the node's own transmission."""
+
+    def engine_form(self) -> EngineForm | None:
+        """The rule as the engine runs it, or ``None`` for a rule the engine does not know.
+
+        Only a class that defines ``engine_form`` itself is run by the engine: a subclass
+        of a built-in rule that changes its trigger but not its engine form would
+        otherwise run as its parent (see :func:`engine_form_of`).
+        """
+        return None
+
+
+def engine_form_of(rule: TriggerRule) -> EngineForm | None:
+    """``rule.engine_form()`` when the rule's own class defines it, else ``None``."""
+    if "engine_form" not in type(rule).__dict__:
+        return None
+    return rule.engine_form()
 
 
 class EtaRule(TriggerRule):
@@ -158,6 +191,10 @@ class DynamicRule(EtaRule):
         # eq. (15): transmit when gamma(|e|) >= sigma*alpha(eta) + eps
         return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
 
+    def engine_form(self) -> EngineForm:
+        numbers = {"sigma": self.sigma, "c": self.c, "b": self.b, "eps": self.eps}
+        return EngineForm(DYNAMIC, numbers, (self.gamma, self.alpha, None, None))
+
 
 class StatelessRule(TriggerRule):
     """Base of the rules without internal state: nothing flows, nothing is reset."""
@@ -195,6 +232,9 @@ class StaticRule(StatelessRule):
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         return self.gamma(_norm(e)) - self.eps
+
+    def engine_form(self) -> EngineForm:
+        return EngineForm(STATIC, {"eps": self.eps}, (self.gamma, None, None, None))
 
 
 def send_on_delta(delta: float) -> StaticRule:
@@ -252,6 +292,9 @@ class PeriodicRule(TriggerRule):
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         return np.zeros_like(s)
 
+    def engine_form(self) -> EngineForm:
+        return EngineForm(PERIODIC, {"period": self.period})
+
 
 @dataclass(frozen=True)
 class RelativeRule(StatelessRule):
@@ -287,3 +330,6 @@ class RelativeRule(StatelessRule):
         if y is None:
             raise InputError("RelativeRule.trigger needs the current measurement `y`; got None")
         return _norm(e) - self.rho * _norm(y) - self.eps
+
+    def engine_form(self) -> EngineForm:
+        return EngineForm(RELATIVE, {"rho": self.rho, "eps": self.eps})

@@ -1,6 +1,8 @@
 """Time signals: the known input ``u(t)``, disturbance ``v(t)`` and noise ``m(t)``.
 
-A signal maps a time vector ``t`` of shape ``(B,)`` to values of shape ``(B, dim)``.
+A signal maps a time vector ``t`` of shape ``(B,)`` to values of shape ``(B, dim)``;
+users give their own as a one-run function ``fn(t) -> (dim,)`` (:class:`FunctionSignal`).
+Each signal knows its engine form (:meth:`Signal.engine_form`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,9 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import ModelError
 
+#: Kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+ZERO, CONSTANT, SINUSOID, FUNCTION = 0, 1, 2, 3
+
 
 class Signal(ABC):
     """A vector signal of dimension :attr:`dim`."""
@@ -23,6 +28,10 @@ class Signal(ABC):
     @abstractmethod
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """Values at times ``t`` (B,), shape ``(B, dim)``."""
+
+    @abstractmethod
+    def engine_form(self) -> tuple[int, np.ndarray, Callable[[float], np.ndarray] | None]:
+        """``(kind, numbers, fn)``: the kind code, its numbers, the function to compile or None."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +45,9 @@ class Zero(Signal):
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         return np.zeros((t.shape[0], self.dim))
+
+    def engine_form(self) -> tuple[int, np.ndarray, None]:
+        return ZERO, np.zeros(0), None
 
 
 @dataclass(frozen=True)
@@ -53,6 +65,9 @@ class Constant(Signal):
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.value, (t.shape[0], self.dim))
+
+    def engine_form(self) -> tuple[int, np.ndarray, None]:
+        return CONSTANT, np.array(self.value), None
 
 
 @dataclass(frozen=True)
@@ -94,25 +109,44 @@ class Sinusoid(Signal):
     def __call__(self, t: np.ndarray) -> np.ndarray:
         return np.sin(self.omega * t + self.phase)[:, None] * self.amplitude + self.offset
 
+    def engine_form(self) -> tuple[int, np.ndarray, None]:
+        return SINUSOID, np.concatenate([self.amplitude, self.offset, [self.omega, self.phase]]), None
+
 
 @dataclass(frozen=True)
 class FunctionSignal(Signal):
-    """A user signal ``fn(t) -> (B, dim)``, checked on first construction."""
+    """A user signal ``fn(t) -> (dim,)`` for one time ``t`` (a float), checked at construction.
 
-    fn: Callable[[np.ndarray], np.ndarray]
+    Write it with numpy or ``math``: etobs compiles it.
+
+    Examples
+    --------
+    >>> s = FunctionSignal(lambda t: np.array([np.cos(t), 1.0]), dim=2)
+    >>> s(np.array([0.0, np.pi])).round(12).tolist()
+    [[1.0, 1.0], [-1.0, 1.0]]
+
+    """
+
+    fn: Callable[[float], np.ndarray]
     dim: int
 
     def __post_init__(self) -> None:
         v.function("fn", self.fn)
         v.integer("dim", self.dim, lower=0)
-        out = np.asarray(self.fn(np.zeros(2)), dtype=float)
-        if out.shape != (2, self.dim):
+        out = np.asarray(self.fn(0.0), dtype=float)
+        if out.shape != (self.dim,):
             raise ModelError(
-                f"signal function returned shape {out.shape} for t of shape (2,); expected (2, {self.dim})"
+                f"signal function `fn` returned shape {out.shape} for t = 0.0; expected ({self.dim},): "
+                "write it for one time t (a float), returning a 1-D array"
             )
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
-        return np.asarray(self.fn(t), dtype=float)
+        return np.array([np.asarray(self.fn(float(ti)), dtype=float) for ti in t]).reshape(
+            t.shape[0], self.dim
+        )
+
+    def engine_form(self) -> tuple[int, np.ndarray, Callable[[float], np.ndarray]]:
+        return FUNCTION, np.zeros(0), self.fn
 
 
 def as_signal(name: str, value: object, dim: int) -> Signal:
