@@ -23,8 +23,8 @@ test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
-	$(BIN)/python benchmarks/bench_scaling.py --quick --backend numba
 	$(BIN)/python benchmarks/bench_accuracy.py --quick
+	$(BIN)/python benchmarks/bench_user_model.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -34,8 +34,8 @@ test-fast: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_robot_arm.py
 	$(BIN)/python benchmarks/bench_scaling.py
-	$(BIN)/python benchmarks/bench_scaling.py --backend numba
 	$(BIN)/python benchmarks/bench_accuracy.py --runs 30 --rtol 1e-10 1e-9 1e-8
+	$(BIN)/python benchmarks/bench_user_model.py
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis

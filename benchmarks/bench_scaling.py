@@ -3,14 +3,16 @@
 Robot arm (section 7) with the paper's first parameter row, noise and disturbance;
 the N-node case uses `robot_arm_network` (N/2 independent arms, N sensor nodes).
 Times are measured in one process and reported with their ratio to the first entry
-of each series (these machines are shared: compare ratios, not seconds).
+of each series and, with both backends, the per-point ratio numpy/engine (these
+machines are shared: compare ratios, not seconds).
 
-    python benchmarks/bench_scaling.py                    # runs 1..2600 (30 s), horizon 3..30 s, N 2..100
-    python benchmarks/bench_scaling.py --backend numba    # the compiled backend (numba installed)
+    python benchmarks/bench_scaling.py                    # engine and numpy: runs 1..2600 (30 s), horizon 3..30 s, N 2..100
+    python benchmarks/bench_scaling.py --backend engine   # one backend only ("numba" is its earlier name)
+    python benchmarks/bench_scaling.py --backend numpy    # the batched numpy solver only ("fast" also works)
     python benchmarks/bench_scaling.py --quick            # small sizes, for CI
 
-With ``--backend numba`` each problem structure is compiled once before it is timed;
-the compile time is printed on its own line.
+Each problem structure is compiled (or loaded from the disk cache) once per backend
+before it is timed; that time is printed on its own line.
 """
 
 from __future__ import annotations
@@ -23,39 +25,63 @@ import numpy as np
 from etobs import SaveAt, simulate
 from etobs.examples import random_initial_states, robot_arm, robot_arm_network
 
-BACKEND = "fast"
+#: ``--backend`` values: both backends, or one (earlier names accepted).
+CHOICES = {"both": ("engine", "numpy"), "engine": ("engine",), "numpy": ("numpy",)}
+ALIASES = {"numba": "engine", "fast": "numpy"}
 
 
-def timed(problem, x0, t_end):
-    if BACKEND == "numba":
+def timed(problem, x0, t_end, backends):
+    """``{backend: (seconds, transmissions)}`` for the runs ``x0``, compile excluded."""
+    out = {}
+    for backend in backends:
         start = time.perf_counter()
-        simulate(problem, x0[:1], 1e-3, save=SaveAt(steps=False), backend="numba")
-        print(f"  (compile or reuse for n = {x0.shape[1]}: {time.perf_counter() - start:.2f} s)")
-    start = time.perf_counter()
-    res = simulate(problem, x0, t_end, save=SaveAt(steps=False), backend=BACKEND)
-    elapsed = time.perf_counter() - start
-    if not res.ok:
-        raise RuntimeError(f"a run failed: {set(res.status_labels())}")
-    return elapsed, len(res.transmissions)
+        simulate(problem, x0[:1], 1e-3, save=SaveAt(steps=False), backend=backend)
+        print(f"  ({backend}: compile or reuse for n = {x0.shape[1]}: {time.perf_counter() - start:.2f} s)")
+        start = time.perf_counter()
+        res = simulate(problem, x0, t_end, save=SaveAt(steps=False), backend=backend)
+        elapsed = time.perf_counter() - start
+        if not res.ok:
+            raise RuntimeError(f"a {backend} run failed: {set(res.status_labels())}")
+        out[backend] = (elapsed, len(res.transmissions))
+    return out
 
 
-def series(title, label, points):
+def series(title, label, points, backends):
     print(f"\n{title}")
-    print(f"{label:>10} {'total [s]':>10} {'per run [ms]':>13} {'transmissions':>14} {'ratio':>7}")
-    first = None
-    for key, runs, (elapsed, sent) in points:
-        first = first or elapsed
-        print(f"{key:>10} {elapsed:>10.2f} {elapsed / runs * 1e3:>13.1f} {sent:>14d} {elapsed / first:>7.2f}")
+    head = f"{label:>10}"
+    for b in backends:
+        head += f" {b + ' [s]':>11} {'per run [ms]':>13} {'ratio':>6}"
+    head += f" {'transmissions':>14}"
+    if len(backends) == 2:
+        head += f" {'numpy/engine':>13}"
+    print(head)
+    first: dict[str, float] = {}
+    for key, runs, times in points:
+        line = f"{key:>10}"
+        for b in backends:
+            elapsed = times[b][0]
+            first.setdefault(b, elapsed)
+            line += f" {elapsed:>11.2f} {elapsed / runs * 1e3:>13.1f} {elapsed / first[b]:>6.2f}"
+        sent = {times[b][1] for b in backends}
+        line += f" {'/'.join(str(s) for s in sorted(sent)):>14}"
+        if len(backends) == 2:
+            line += f" {times['numpy'][0] / times['engine'][0]:>12.1f}x"
+        print(line)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
-    parser.add_argument("--backend", choices=("fast", "numba"), default="fast", help="solver (default fast)")
+    parser.add_argument(
+        "--backend",
+        type=lambda s: ALIASES.get(s, s),
+        choices=tuple(CHOICES),
+        default="both",
+        help="both (default), engine or numpy; the earlier names numba and fast are accepted",
+    )
     args = parser.parse_args()
-    global BACKEND
-    BACKEND = args.backend
-    print(f"backend: {BACKEND}")
+    backends = CHOICES[args.backend]
+    print(f"backends: {', '.join(backends)}")
     q = args.quick
     arm = robot_arm()
     x_all = random_initial_states(2600, seed=1)
@@ -65,11 +91,17 @@ def main() -> None:
     series(
         f"runs (horizon {t_runs:g} s, one batch)",
         "runs",
-        [(b, b, timed(arm, x_all[:b], t_runs)) for b in counts],
+        [(b, b, timed(arm, x_all[:b], t_runs, backends)) for b in counts],
+        backends,
     )
 
     horizons = (0.5, 1.0, 2.0) if q else (3.0, 10.0, 30.0)
-    series("horizon (10 runs)", "t_end [s]", [(f"{h:g}", 10, timed(arm, x_all[:10], h)) for h in horizons])
+    series(
+        "horizon (10 runs)",
+        "t_end [s]",
+        [(f"{h:g}", 10, timed(arm, x_all[:10], h, backends)) for h in horizons],
+        backends,
+    )
 
     nodes = (2, 10) if q else (2, 10, 50, 100)
     t_nodes = 0.5 if q else 3.0
@@ -77,8 +109,8 @@ def main() -> None:
     for n in nodes:
         arms = n // 2
         x0 = np.concatenate([np.roll(x_all[:10], k, axis=0) for k in range(arms)], axis=1)
-        points.append((n, 10, timed(robot_arm_network(arms), x0, t_nodes)))
-    series(f"nodes N (10 runs, horizon {t_nodes:g} s)", "N", points)
+        points.append((n, 10, timed(robot_arm_network(arms), x0, t_nodes, backends)))
+    series(f"nodes N (10 runs, horizon {t_nodes:g} s)", "N", points, backends)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ SPEC = {
     "initial_states": {"low": [-1.0, -1.0], "high": [1.0, 1.0], "runs": 3, "seed": 4},
     "horizon": {"t_end": 8.0},
     "metrics": {"error_window": [6.0, 8.0], "error_grid_step": 0.01},
-    "execution": {"backend": "fast"},
+    "execution": {"backend": "numpy"},
     "rules": [
         {"name": "dynamic", "kind": "base"},
         {"name": "static", "kind": "static", "eps": 0.01},
@@ -44,7 +44,7 @@ t_end = 4.0
 error_window = [3.0, 4.0]
 error_grid_step = 0.01
 [execution]
-backend = "fast"
+backend = "numpy"
 [[rules]]
 name = "dynamic"
 kind = "base"
@@ -162,6 +162,25 @@ def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
 def test_spec_errors_name_the_key(change, message):
     with pytest.raises(SpecError, match=message):
         parse_compare_spec({**SPEC, **change})
+
+
+def test_auto_backend_is_decided_per_entry_by_simulate():
+    # the engine runs the base setting; a network needs the batched numpy solver
+    spec = parse_compare_spec(
+        {
+            **SPEC,
+            "initial_states": {"low": [-1.0, -1.0], "high": [1.0, 1.0], "runs": 2, "seed": 4},
+            "horizon": {"t_end": 2.0},
+            "metrics": {"error_window": [1.0, 2.0], "error_grid_step": 0.01},
+            "execution": {"backend": "auto"},
+            "rules": [{"name": "dynamic", "kind": "base"}],
+        }
+    )
+    assert spec.backend == "auto"
+    backends = {e.network: e.backend for e in compare(spec).entries}
+    assert backends == {"ideal": "engine", "lossy": "numpy"}
+    numpy_spec = parse_compare_spec({**SPEC, "execution": {"backend": "fast"}})
+    assert numpy_spec.backend == "numpy"  # the earlier name
 
 
 def test_rule_errors_at_run_time_name_the_entry_and_node():

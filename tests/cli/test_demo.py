@@ -47,6 +47,23 @@ def test_demo_options(tmp_path):
     assert not (out / "states.png").exists()
 
 
+@pytest.mark.parametrize(("asked", "ran"), [("auto", "engine"), ("numba", "engine"), ("fast", "numpy")])
+def test_demo_backends_and_their_earlier_names(tmp_path, capsys, asked, ran):
+    out = tmp_path / "ra"
+    argv = ["demo", "robot-arm", "--out", str(out), "--t-end", "0.5", "--no-plots", "--backend", asked]
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["backend"] == ran and summary["backend_reason"]
+    assert f"({ran} backend)" in capsys.readouterr().out
+
+
+def test_demo_backend_help_names_the_backends(capsys):
+    with pytest.raises(SystemExit):
+        main(["demo", "robot-arm", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "{auto,engine,numpy,scipy}" in text and "numba and fast are accepted" in text
+
+
 @pytest.mark.parametrize(
     ("argv", "match"),
     [

@@ -9,6 +9,18 @@ import numpy as np
 from etobs import DynamicRule, EstimationProblem, Linear, Node, Observer, Plant, Quadratic
 
 
+def _plant(t, x, u, v, p):
+    return -p[0] * x + np.sin(t)
+
+
+def _output(x, p):
+    return x
+
+
+def _observer(t, z, u, ybar, yhat, p):
+    return -p[0] * z + np.sin(t) + 2.0 * (ybar - yhat)
+
+
 def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False):
     """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
 
@@ -24,8 +36,9 @@ def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=Fal
     if die_marker and not Path(die_marker).exists():
         Path(die_marker).write_text("died once")
         os._exit(3)
-    plant = Plant(f_p=lambda t, x, u, v: -k * x + np.sin(t)[:, None], h=lambda x: x, n_x=1, n_y=1)
-    obs = Observer(f_o=lambda t, z, u, ybar, yhat: -k * z + np.sin(t)[:, None] + 2.0 * (ybar - yhat), n_z=1)
+    # k travels as the parameters: every row runs the same compiled functions
+    plant = Plant(f_p=_plant, h=_output, n_x=1, n_y=1, params=[k])
+    obs = Observer(f_o=_observer, n_z=1, params=[k])
     rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.1, b=1.0, eps=eps, eta0=1.0)
     return EstimationProblem(plant, obs, [Node((0,), rule)])
 

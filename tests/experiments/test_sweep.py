@@ -305,16 +305,17 @@ def test_unreachable_dask_scheduler_is_an_input_error(tiny, tmp_path):
         run_sweep(tiny, tmp_path, executor="dask", scheduler="tcp://127.0.0.1:1", progress=False)
 
 
-def test_auto_backend_falls_back_to_fast_without_compiled_functions(tiny):
-    # the scalar test factory gives no jit functions
-    assert tiny.backend == "fast"
+def test_auto_is_passed_to_simulate_and_earlier_backend_names_are_accepted(tiny):
+    # "auto" is decided by simulate for each problem, not by the sweep
+    assert tiny.backend == "auto"
     assert tiny.with_backend("scipy").backend == "scipy"
     assert tiny.with_backend("scipy").identity() != tiny.identity()
+    assert tiny.with_backend("numba").backend == "engine"
+    assert tiny.with_backend("fast").backend == "numpy"
+    assert tiny.with_backend("numba").identity() == tiny.with_backend("engine").identity()
 
 
-def test_numba_backend_sweep_gives_the_fast_backend_counts(tmp_path):
-    pytest.importorskip("numba")
-
+def test_engine_backend_sweep_gives_the_numpy_backend_counts(tmp_path):
     def spec(backend):
         return parse_spec(
             {
@@ -332,12 +333,17 @@ def test_numba_backend_sweep_gives_the_fast_backend_counts(tmp_path):
             }
         )
 
-    assert spec("auto").backend == "numba"
-    fast = run_sweep(spec("fast"), tmp_path / "fast", executor="serial", progress=False)
-    ours = run_sweep(spec("numba"), tmp_path / "numba", executor="serial", progress=False)
-    assert [r["transmissions"] for r in ours.runs] == [r["transmissions"] for r in fast.runs]
-    errors = np.array([[a["error"], b["error"]] for a, b in zip(ours.runs, fast.runs, strict=True)])
+    assert spec("auto").backend == "auto"
+    batched = run_sweep(spec("numpy"), tmp_path / "numpy", executor="serial", progress=False)
+    ours = run_sweep(spec("engine"), tmp_path / "engine", executor="serial", progress=False)
+    auto = run_sweep(spec("auto"), tmp_path / "auto", executor="serial", progress=False)
+    assert [r["transmissions"] for r in ours.runs] == [r["transmissions"] for r in batched.runs]
+    errors = np.array([[a["error"], b["error"]] for a, b in zip(ours.runs, batched.runs, strict=True)])
     np.testing.assert_allclose(errors[:, 0], errors[:, 1], rtol=1e-6)
+    # "auto" runs the robot arm on the engine: the same numbers, bit for bit
+    assert [(r["transmissions"], r["error"]) for r in auto.runs] == [
+        (r["transmissions"], r["error"]) for r in ours.runs
+    ]
 
 
 def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_path):

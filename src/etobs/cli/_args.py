@@ -22,6 +22,20 @@ def positive_int(text: str) -> int:
     return value
 
 
+#: ``--backend`` choices, as :func:`~etobs.estimation.simulate.simulate` takes them.
+BACKEND_CHOICES = ("auto", "engine", "numpy", "scipy")
+BACKEND_HELP = (
+    "auto (the compiled engine when it models the problem, else numpy), engine, numpy "
+    "(the batched numpy solver) or scipy (the solve_ivp reference); the earlier names "
+    "numba and fast are accepted"
+)
+
+
+def backend(text: str) -> str:
+    """An argparse type for ``--backend``: earlier names mapped to the current ones."""
+    return {"numba": "engine", "fast": "numpy"}.get(text, text)
+
+
 def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, Any]:
     """The TOML spec ``name``: a packaged one (``package/data/packaged[name]``) or a file."""
     if name in packaged:

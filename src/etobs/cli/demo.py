@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from etobs import __version__
+from etobs.cli._args import BACKEND_CHOICES, BACKEND_HELP, backend
 from etobs.estimation import (
     max_estimation_error,
     min_inter_event_time,
@@ -67,7 +68,13 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--no-noise", action="store_true", help="drop the measurement noise m")
     p.add_argument("--no-disturbance", action="store_true", help="drop the disturbance v")
-    p.add_argument("--backend", choices=("fast", "scipy", "numba"), default="fast", help="solver backend")
+    p.add_argument(
+        "--backend",
+        type=backend,
+        choices=BACKEND_CHOICES,
+        default="auto",
+        help=f"solver: {BACKEND_HELP} (default auto)",
+    )
     p.add_argument("--rtol", type=float, default=1e-10, help="relative and absolute tolerance")
     p.add_argument("--no-plots", action="store_true", help="write summary.json only")
     p.set_defaults(func=run_robot_arm)
@@ -120,7 +127,8 @@ def run_robot_arm(args: argparse.Namespace) -> int:
         "error_grid_step": GRID_STEP,
         "noise": not args.no_noise,
         "disturbance": not args.no_disturbance,
-        "backend": args.backend,
+        "backend": result.backend,
+        "backend_reason": result.backend_reason,
         "rtol": args.rtol,
         "paper": {"min_inter_event_time": list(PAPER_MIN_INTER_EVENT)},
         "versions": {"etobs": __version__, "numpy": np.__version__, "python": platform.python_version()},
@@ -157,7 +165,8 @@ def _table(s: dict[str, Any]) -> str:
         return "n/a" if x is None else format(x, spec)
 
     lines = [
-        f"robot arm, x0 = {s['x0']}, t in [0, {s['t_end']:g}], status: {s['status']}",
+        f"robot arm, x0 = {s['x0']}, t in [0, {s['t_end']:g}], status: {s['status']} "
+        f"({s['backend']} backend)",
         f"{'':28}{'sensor 1':>12}{'sensor 2':>12}",
         f"{'transmissions':28}{s['transmissions'][0]:>12d}{s['transmissions'][1]:>12d}",
         f"{'min inter-event time [s]':28}" + "".join(f"{fmt(m):>12}" for m in s["min_inter_event_time"]),

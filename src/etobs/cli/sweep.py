@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from etobs.cli._args import positive_int
+from etobs.cli._args import BACKEND_CHOICES, BACKEND_HELP, backend, positive_int
 from etobs.errors import InputError
 from etobs.experiments import SweepResult, load_spec, run_sweep
 from etobs.experiments.executors import EXECUTORS
@@ -29,9 +29,10 @@ def _execution_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="seed of the initial states (overrides spec)")
     p.add_argument(
         "--backend",
-        choices=("auto", "fast", "numba", "scipy"),
+        type=backend,
+        choices=BACKEND_CHOICES,
         default=None,
-        help="solver (overrides the spec's execution.backend; auto: numba when installed)",
+        help=f"solver, overriding the spec's execution.backend: {BACKEND_HELP}",
     )
     p.add_argument(
         "--progress",

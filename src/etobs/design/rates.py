@@ -51,9 +51,10 @@ def estimate_output_rate(
     t = np.broadcast_to(grid, traj.t.shape).reshape(-1)
     ok = np.all(np.isfinite(x), axis=1)
     x, t = x[ok], t[ok]
-    f = problem.plant.f_p(t, x, problem.u(t), problem.v(t))
+    calls = problem.calls()  # the one-run f_p and h on every grid point (compiled when numba can)
+    f = calls.f_p(t, x, problem.u(t), problem.v(t))
     # step relative to the state's size, as for a finite-difference Jacobian
     h = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.linalg.norm(x, axis=1, keepdims=True))
     h = h / np.maximum(np.linalg.norm(f, axis=1, keepdims=True), 1e-300)
-    ydot = (problem.plant.h(x + h * f) - problem.plant.h(x - h * f)) / (2 * h)
+    ydot = (calls.h(x + h * f) - calls.h(x - h * f)) / (2 * h)
     return np.array([np.max(np.linalg.norm(ydot[:, list(nd.outputs)], axis=1)) for nd in problem.nodes])

@@ -289,17 +289,6 @@ def _run_entry(
 
 
 def _simulate(spec: CompareSpec, problem: Any, x0: np.ndarray, save: SaveAt) -> tuple[EstimationResult, str]:
-    backend = spec.backend
-    if backend == "auto":
-        from etobs.hybrid.compiled import numba_available
-
-        usable = numba_available() and problem.plant.jit is not None and problem.observer.jit is not None
-        backend = "numba" if usable and not problem.extended else "fast"
-        if backend == "numba":
-            try:
-                res = simulate(problem, x0, spec.t_end, options=spec.options, save=save, backend="numba")
-                return res, "numba"
-            except InputError:  # a rule without a compiled form (e.g. relative)
-                backend = "fast"
-    res = simulate(problem, x0, spec.t_end, options=spec.options, save=save, backend=backend)
-    return res, backend
+    """Simulate one entry; ``"auto"`` is decided by :func:`~etobs.estimation.simulate.simulate`."""
+    res = simulate(problem, x0, spec.t_end, options=spec.options, save=save, backend=spec.backend)
+    return res, res.backend

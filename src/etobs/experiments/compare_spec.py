@@ -18,7 +18,7 @@ A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
     [solver]                       # any SolverOptions field
     rtol = 1e-10
     [execution]
-    backend = "auto"               # "numba" where the entry allows it, else "fast"
+    backend = "auto"               # the engine where it models the entry, else numpy
 
     [[rules]]                      # one entry per rule; per-node values are a number
     name = "dynamic (paper)"       # (every node) or a list (one per node)
@@ -60,6 +60,7 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.spec import (
     InitialStates,
     Metrics,
+    parse_backend,
     parse_initial_states,
     parse_metrics,
     parse_solver,
@@ -86,7 +87,6 @@ RULE_KINDS: dict[str, tuple[str, ...]] = {
     "relative": ("rho", "eps"),
     "send_on_delta": ("delta",),
 }
-BACKENDS = ("auto", "fast", "numba")
 
 
 @dataclass(frozen=True)
@@ -209,9 +209,7 @@ def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
     hor = _keys("horizon", top["horizon"], {"t_end"}, set())
     t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
     execution = _keys("execution", top.get("execution", {}), set(), {"backend"})
-    backend = execution.get("backend", "auto")
-    if backend not in BACKENDS:
-        raise SpecError(f"`execution.backend` must be one of {BACKENDS}; got {backend!r}")
+    backend = parse_backend(execution.get("backend", "auto"))
     rules = _list("rules", top["rules"], _rule)
     networks = _list("networks", top.get("networks", [{"name": "ideal"}]), _network)
     return CompareSpec(

@@ -26,7 +26,7 @@ A spec is data, usually a TOML file (see ``examples/table1.toml``)::
     rtol = 1e-10
     [execution]
     chunk_size = 100               # runs solved together
-    backend = "auto"               # "numba" when installed, else "fast"; or "scipy"
+    backend = "auto"               # or "engine", "numpy", "scipy" (see etobs.simulate)
 
 Every key is checked: unknown keys are rejected and a wrong value names its key.
 """
@@ -45,9 +45,13 @@ from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.errors import InputError
+from etobs.estimation.simulate import ALIASES, BACKENDS
 from etobs.hybrid.options import SolverOptions
 
-SWEEP_BACKENDS = ("auto", "fast", "numba", "scipy")
+#: ``execution.backend`` values, as :func:`~etobs.estimation.simulate.simulate` takes them.
+SWEEP_BACKENDS = BACKENDS
+#: Earlier names of two backends (``"numba"``, ``"fast"``), still accepted in specs.
+BACKEND_ALIASES = ALIASES
 _SOLVER_KEYS = {
     "method",
     "rtol",
@@ -151,18 +155,14 @@ class SweepSpec:
 
     @property
     def backend(self) -> str:
-        """The solver backend: ``execution.backend``, with ``"auto"`` resolved.
+        """The solver backend asked for: ``execution.backend`` (default ``"auto"``).
 
-        ``"auto"`` is the compiled ``"numba"`` backend when numba is installed and the
-        system is a registered example (which provide compiled functions), else
-        ``"fast"``; a user factory with compiled functions asks for ``"numba"``.
+        Earlier names are given as the current ones (``"numba"`` as ``"engine"``,
+        ``"fast"`` as ``"numpy"``). ``"auto"`` is passed to
+        :func:`~etobs.estimation.simulate.simulate`, which picks the engine when it
+        models the problem and the numpy solver otherwise.
         """
-        chosen = self.raw.get("execution", {}).get("backend", "auto")
-        if chosen != "auto":
-            return str(chosen)
-        from etobs.experiments.systems import supports_numba
-
-        return "numba" if supports_numba(self) else "fast"
+        return backend_name(self.raw.get("execution", {}).get("backend", "auto"))
 
     @property
     def options(self) -> SolverOptions:
@@ -271,8 +271,7 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
     execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size", "backend"})
     if "chunk_size" in execution:
         _number("execution.chunk_size", execution["chunk_size"], lower=1, integer=True)
-    if execution.get("backend", "auto") not in SWEEP_BACKENDS:
-        raise SpecError(f"`execution.backend` must be one of {SWEEP_BACKENDS}; got {execution['backend']!r}")
+    parse_backend(execution.get("backend", "auto"))
     _check_names(rows, scenarios, fixed)
     return SweepSpec(
         name=name,
@@ -286,6 +285,22 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
         solver=dict(solver),
         raw=raw,
     )
+
+
+def backend_name(value: Any) -> str:
+    """The current name of a backend (earlier names mapped, others unchanged)."""
+    return BACKEND_ALIASES.get(value, value) if isinstance(value, str) else value
+
+
+def parse_backend(value: Any) -> str:
+    """Validate ``execution.backend``: one of :data:`SWEEP_BACKENDS` or an earlier name."""
+    name = backend_name(value)
+    if name not in SWEEP_BACKENDS:
+        raise SpecError(
+            f"`execution.backend` must be one of {SWEEP_BACKENDS} (or the earlier names "
+            f"'numba', 'fast'); got {value!r}"
+        )
+    return str(name)
 
 
 def parse_initial_states(table: Any) -> InitialStates:

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from typing import Any
 
 from etobs.estimation.problem import EstimationProblem
-from etobs.examples.registry import REGISTRY, resolve_factory
+from etobs.examples.registry import resolve_factory
 from etobs.experiments.spec import SpecError, SweepSpec
 
 
@@ -54,16 +54,3 @@ def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem
             f"the factory {spec.factory!r} returned {type(problem).__name__}, not an EstimationProblem"
         )
     return problem
-
-
-def supports_numba(spec: SweepSpec) -> bool:
-    """Whether ``"auto"`` picks the compiled backend.
-
-    It does when numba is installed and the system is a registered example (those
-    provide compiled functions). The driver never calls a user factory (it may be
-    costly or fail; it runs in the workers), so a user factory with compiled functions
-    opts in with ``execution.backend = "numba"``.
-    """
-    from etobs.hybrid.compiled import numba_available
-
-    return spec.factory in REGISTRY and numba_available()

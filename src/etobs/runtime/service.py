@@ -106,13 +106,14 @@ class ObserverCore:
 
     def xhat(self) -> np.ndarray:
         """The estimate ``psi(z)``."""
-        return self.problem.psi(self.z[None])[0]
+        return np.asarray(self.problem.observer.call_psi(self.z, self.problem.plant.n_x), dtype=float)
 
     def _f(self, t: float, z: np.ndarray) -> np.ndarray:
+        """``f_o(t, z, u(t), ybar, h(psi(z)))`` of the one run the service observes."""
         pb = self.problem
-        tt = np.array([t])
-        yhat = pb.plant.h(pb.psi(z[None]))
-        return pb.observer.f_o(tt, z[None], pb.u(tt), self.ybar[None], yhat)[0]
+        u = pb.u(np.array([t]))[0]
+        yhat = np.asarray(pb.plant.call_h(pb.observer.call_psi(z, pb.plant.n_x)), dtype=float)
+        return np.asarray(pb.observer.call_f_o(t, z, u, self.ybar.copy(), yhat), dtype=float)
 
     def advance(self, t: float) -> None:
         """Integrate the observer to time ``t``, applying the queued packets on the way."""

@@ -1,0 +1,123 @@
+"""A model of a user's own on every backend, and what its compile costs.
+
+Run: ``python benchmarks/bench_user_model.py [--quick]``. The model (benchmarks/user_model.py)
+has a ``Custom`` K-function, a time-varying ``FunctionSignal`` input and a vector node.
+Prints per-run times of backend="engine" (the default) and backend="scipy" on the same
+runs and their ratio, the largest gap between their transmission times, and the compile
+times measured in fresh processes sharing a fresh cache folder:
+cold (a new model), cached (a new process), after editing one function, after changing
+only numbers (params), and with the factory named by file path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+
+def per_run(quick: bool) -> None:
+    from etobs import simulate
+    from user_model import problem
+
+    pb = problem()
+    rng = np.random.default_rng(1)
+    n_engine, n_scipy = (20, 2) if quick else (200, 5)
+    X = rng.uniform(-1, 1, size=(n_engine, 4))
+    t_end = 10.0 if quick else 20.0
+    simulate(pb, X[:1], 0.1)  # compile (or load) first
+    t = time.perf_counter()
+    eng = simulate(pb, X, t_end)
+    t_eng = (time.perf_counter() - t) / n_engine
+    t = time.perf_counter()
+    ref = simulate(pb, X[:n_scipy], t_end, backend="scipy")
+    t_ref = (time.perf_counter() - t) / n_scipy
+    gap = 0.0
+    same = True
+    for r in range(n_scipy):
+        for node in range(pb.n_nodes):
+            a = eng.transmissions.times(r, node)
+            b = ref.transmissions.times(r, node)
+            same &= a.shape == b.shape
+            if a.shape == b.shape and a.size:
+                gap = max(gap, float(np.max(np.abs(a - b))))
+    print(
+        f"user model, {t_end:g} s horizon: engine {t_eng * 1e3:.2f} ms/run ({n_engine} runs, "
+        f"{eng.backend}), scipy {t_ref * 1e3:.1f} ms/run ({n_scipy} runs)"
+    )
+    print(
+        f"  ratio scipy/engine: {t_ref / t_eng:.0f}x; same transmission counts: {same}; "
+        f"largest event-time gap: {gap:.2e} s"
+    )
+
+
+SCRIPT = textwrap.dedent(
+    """
+    import sys, time
+    t0 = time.perf_counter()
+    sys.path.insert(0, {here!r})
+    {setup}
+    from etobs import simulate
+    pb = {make}
+    simulate(pb, [0.1, 0.0, -0.1, 0.0], 0.5)
+    print(time.perf_counter() - t0)
+    """
+)
+
+
+def run(cache: str, setup: str, make: str) -> float:
+    env = {**os.environ, "ETOBS_CACHE_DIR": cache}
+    code = SCRIPT.format(here=str(HERE), setup=setup, make=make)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def compile_times() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = str(Path(tmp) / "cache")
+        src = Path(tmp) / "mymodel.py"
+        src.write_text((HERE / "user_model.py").read_text())
+        setup = f"sys.path.insert(0, {tmp!r}); import mymodel"
+        engine = run(cache, setup, "mymodel.problem()")  # also compiles the engine into this cache
+        cold_src = src.read_text().replace("s * s * (1.0 + s)", "s * s * (1.0 + 0.5 * s)")
+        src.write_text(cold_src.replace("K = 0.4", "K = 0.41"))
+        cold = run(cache, setup, "mymodel.problem()")
+        cached = run(cache, setup, "mymodel.problem()")
+        src.write_text(src.read_text().replace("0.5 * math.sin(0.7 * t", "0.6 * math.sin(0.7 * t"))
+        edited = run(cache, setup, "mymodel.problem()")
+        numbers = run(cache, setup, "mymodel.problem(damping=0.5)")
+        by_path = run(
+            cache,
+            "from etobs.examples.registry import resolve_factory",
+            f"resolve_factory({str(src) + ':problem'!r})()",
+        )
+    print("first simulate in a fresh process, fresh cache folder [s]:")
+    print(f"  engine not yet compiled on this machine: {engine:.1f}")
+    print(f"  new model (engine cached): {cold:.2f}; same model, new process: {cached:.2f}")
+    print(
+        f"  one function edited: {edited:.2f}; only numbers changed: {numbers:.2f}; "
+        f"factory named by path: {by_path:.2f}"
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    per_run(args.quick)
+    if not args.quick:
+        compile_times()
+
+
+if __name__ == "__main__":
+    main()
