@@ -93,10 +93,10 @@ def _node():
         (lambda: robot_arm(L=np.ones((2, 4))), InputError, r"`L` has shape \(2, 4\); expected \(4, 2\)"),
         (lambda: robot_arm(sigma=(1, 2, 3)), InputError, r"`sigma` must have 2 entries; got 3"),
         (lambda: SolverOptions(first_step=0.0), InputError, r"`first_step` must be > 0; got 0"),
-        (lambda: solve("system", [0.0], (0, 1)), InputError, r"`system` must be a HybridSystem; got str"),
+        (lambda: solve("system", [0.0], (0, 1)), InputTypeError, r"`system` must be a HybridSystem; got str"),
         (
             lambda: solve_reference("system", [0.0], (0, 1)),
-            InputError,
+            InputTypeError,
             r"`system` must be a HybridSystem; got str",
         ),
         (

@@ -1,4 +1,9 @@
-"""Small hybrid systems with known solutions, shared by the solver tests."""
+"""Small hybrid systems with known solutions, shared by the solver tests.
+
+Each is a one-run :class:`~etobs.hybrid.HybridSystem` whose numbers travel in
+``params``: the functions are module-level and closure-free, so each compiles once per
+session, whatever the numbers.
+"""
 
 import numpy as np
 
@@ -7,46 +12,74 @@ from etobs.hybrid import HybridSystem
 G = 9.81
 
 
-def bouncing_ball(restitution=0.5):
-    """x = (height, velocity); impact when the ball falls through height 0."""
+def _ball_flow(t, x, p):
+    return np.array([x[1], -p[1]])
+
+
+def _ball_guard(t, x, p):
+    # only a falling ball can hit the floor: a ball resting at 0 after a jump flows on
+    return np.array([-x[0] if x[1] < 0 else -1.0])
+
+
+def _ball_jump(k, t, x, p):
+    return np.array([0.0, -p[0] * x[1]])
+
+
+def bouncing_ball(restitution=0.5, g=G):
+    """x = (height, velocity), p = (restitution, g); impact when the ball falls through 0."""
     return HybridSystem(
         n=2,
         n_rules=1,
-        flow=lambda t, x: np.stack([x[:, 1], np.full(x.shape[0], -G)], axis=1),
-        guard=lambda t, x: np.where(x[:, 1] < 0, -x[:, 0], -1.0)[:, None],
-        jump=lambda k, t, x: np.stack([np.zeros(x.shape[0]), -restitution * x[:, 1]], axis=1),
+        flow=_ball_flow,
+        guard=_ball_guard,
+        jump=_ball_jump,
         rule_names=("impact",),
+        params=[restitution, g],
     )
 
 
+def _rotation(t, x, p):
+    return np.array([x[1], -x[0]])
+
+
+def _above_level(t, x, p):
+    return np.array([x[0] - p[0]])
+
+
+def _mirror(k, t, x, p):
+    return np.array([-x[0], x[1]])
+
+
 def grazing_oscillator(level=0.999):
-    """x = (sin t, cos t) until sin t >= level; the jump mirrors the position.
+    """x = (sin t, cos t) until sin t >= level = p[0]; the jump mirrors the position.
 
     The event function sin(t) - level is positive only for 2*arccos(level) ~ 0.089 s
     around each peak: a sign test at step ends misses it when steps are long.
     """
-    return HybridSystem(
-        n=2,
-        n_rules=1,
-        flow=lambda t, x: np.stack([x[:, 1], -x[:, 0]], axis=1),
-        guard=lambda t, x: (x[:, 0] - level)[:, None],
-        jump=lambda k, t, x: x * np.array([-1.0, 1.0]),
-    )
+    return HybridSystem(n=2, n_rules=1, flow=_rotation, guard=_above_level, jump=_mirror, params=[level])
+
+
+def _unit_rates(t, x, p):
+    return np.ones(2)
+
+
+def _past_period(t, x, p):
+    return x - p
+
+
+def _reset_clock(k, t, x, p):
+    out = x.copy()
+    out[k] = 0.0
+    return out
 
 
 def two_clocks(period_a, period_b):
-    """Two clocks x_k' = 1 reset to 0 when they reach their period."""
-    periods = np.array([period_a, period_b])
-
-    def jump(k, t, x):
-        out = x.copy()
-        out[:, k] = 0.0
-        return out
-
+    """Two clocks x_k' = 1 reset to 0 when they reach their period p[k] (rule k)."""
     return HybridSystem(
         n=2,
         n_rules=2,
-        flow=lambda t, x: np.ones_like(x),
-        guard=lambda t, x: x - periods,
-        jump=jump,
+        flow=_unit_rates,
+        guard=_past_period,
+        jump=_reset_clock,
+        params=[period_a, period_b],
     )

@@ -79,7 +79,12 @@ def test_build_writes_one_module_per_content_and_reuses_it(tmp_path, monkeypatch
     template.write_text(TEMPLATE)
     dep = tmp_path / "dep.py"
     dep.write_text("# one\n")
-    consts = {"K": 2.0, "V": np.array([0.5])}
+    calls = []
+
+    def consts():
+        calls.append(1)
+        return {"K": 2.0, "V": np.array([0.5])}
+
     ns = _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
     assert ns["twice"](3.0) == 6.5
     folder = tmp_path / "cache" / "kernels"
@@ -90,18 +95,23 @@ def test_build_writes_one_module_per_content_and_reuses_it(tmp_path, monkeypatch
     assert list((folder / "__pycache__").glob("*.nbi"))  # numba saved the machine code
     again = _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
     assert again["twice"] is ns["twice"]  # the same module, imported once
-    other = _jitcache.build("tpl", template, {"K": 3.0, "V": np.array([0.5])}, {"jit": {}}, depends=(dep,))
+    assert len(calls) == 1  # the constants are computed on a cache miss only
+    dep.write_text("# two\n")  # the constants come from the dependencies: a change is a new file
+    other = _jitcache.build(
+        "tpl", template, lambda: {"K": 3.0, "V": np.array([0.5])}, {"jit": {}}, depends=(dep,)
+    )
     assert other["twice"](3.0) == 9.5
-    dep.write_text("# two\n")
-    _jitcache.build("tpl", template, consts, {"jit": {}}, depends=(dep,))
-    assert len(list(folder.glob("*.py"))) == 3  # a new constant or dependency: a new file
+    _jitcache.build("tpl", template, consts, {"jit": {"nogil": True}}, depends=(dep,))
+    assert len(list(folder.glob("*.py"))) == 3  # so is a dependency or a decorator change
 
 
 def test_build_without_a_cache_compiles_in_memory(tmp_path, monkeypatch):
     monkeypatch.setenv("ETOBS_CACHE_DIR", "off")
     template = tmp_path / "tpl.py"
     template.write_text(TEMPLATE)
-    ns = _jitcache.build("mem", template, {"K": 2.0, "V": np.array([1.0])}, {"jit": {"fastmath": False}})
+    ns = _jitcache.build(
+        "mem", template, lambda: {"K": 2.0, "V": np.array([1.0])}, {"jit": {"fastmath": False}}
+    )
     assert ns["twice"](3.0) == 7.0
     assert ns["__name__"] == "etobs._template_mem"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tpl.py"]  # nothing written
@@ -115,7 +125,7 @@ def test_unusable_cache_folder_warns_and_compiles_in_memory(tmp_path, monkeypatc
     template = tmp_path / "tpl.py"
     template.write_text(TEMPLATE)
     with pytest.warns(RuntimeWarning, match="cannot use the compile cache in .*kernels.*compiling in memory"):
-        ns = _jitcache.build("t", template, {"K": 2.0, "V": np.array([0.0])}, {"jit": {}})
+        ns = _jitcache.build("t", template, lambda: {"K": 2.0, "V": np.array([0.0])}, {"jit": {}})
     assert ns["twice"](3.0) == 6.0
 
 
@@ -127,7 +137,8 @@ def test_second_process_loads_the_built_template_from_disk(tmp_path, monkeypatch
         import json, numpy as np
         from pathlib import Path
         from etobs.hybrid import _jitcache
-        ns = _jitcache.build("tpl", Path({str(template)!r}), {{"K": 2.0, "V": np.array([0.5])}}, {{"jit": {{}}}})
+        ns = _jitcache.build("tpl", Path({str(template)!r}), lambda: {{"K": 2.0, "V": np.array([0.5])}},
+                             {{"jit": {{}}}})
         value = ns["twice"](3.0)
         stats = ns["twice"].stats
         print(json.dumps({{"hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values()),

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from etobs.hybrid.system import HybridSystem
+from etobs.hybrid.system import BatchedSystem
 from etobs.model.network import Link, PacketStream
 from etobs.model.rules import TriggerRule
 
@@ -74,8 +74,8 @@ def slot_columns(ch: Channel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return base, base + 1, base[:, None] + 2 + np.arange(ch.size)[None, :]
 
 
-def build_system(pb: EstimationProblem, calls: ModelCalls) -> HybridSystem:
-    """The problem as a :class:`~etobs.hybrid.HybridSystem` (eq. (16)--(22))."""
+def build_system(pb: EstimationProblem, calls: ModelCalls) -> BatchedSystem:
+    """The problem as a :class:`~etobs.hybrid.BatchedSystem` (eq. (16)--(22))."""
     return _Assembly(pb, calls).system()
 
 
@@ -230,12 +230,12 @@ class _Assembly:
             self.streams[key] = PacketStream(ch.link, self.pb.network.seed, run, c)
         return self.streams[key]
 
-    def system(self) -> HybridSystem:
+    def system(self) -> BatchedSystem:
         names = tuple(ch.name for ch in self.channels)
         if self.networked:
             names = tuple(f"deliver {n}" for n in names) + names
         jump: Callable[[int, np.ndarray, np.ndarray], np.ndarray] = self.jump
-        return HybridSystem(
+        return BatchedSystem(
             n=self.lay.n,
             n_rules=len(names),
             flow=self.flow,

@@ -21,7 +21,7 @@ import numpy as np
 
 from etobs.errors import InputError, InputTypeError, ModelError
 from etobs.estimation.assembly import N_META, Channel
-from etobs.hybrid.system import HybridSystem
+from etobs.hybrid.system import BatchedSystem
 from etobs.model.network import Network
 from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
@@ -229,8 +229,8 @@ class EstimationProblem:
             q[:, lay.run] = np.arange(b) if run_ids is None else run_ids
         return q
 
-    def hybrid_system(self, compiled: bool = True) -> HybridSystem:
-        """The hybrid model (16)--(22) as a batched :class:`~etobs.hybrid.HybridSystem`.
+    def hybrid_system(self, compiled: bool = True) -> BatchedSystem:
+        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.BatchedSystem`.
 
         Jump rules ``0 .. C-1`` are the nodes' transmissions (output nodes, then input
         nodes); with a network, rules ``C .. 2C-1`` deliver their packets. The model

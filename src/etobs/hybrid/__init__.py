@@ -1,13 +1,14 @@
-"""Generic batched hybrid-system solvers; nothing here knows about observers or sensors."""
+"""Generic hybrid-system solvers; nothing here knows about observers or sensors."""
 
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solution import HybridArc, HybridSolution, JumpLog, SavedGrid
 from etobs.hybrid.solver import solve
 from etobs.hybrid.status import Status, status_message
-from etobs.hybrid.system import HybridSystem
+from etobs.hybrid.system import BatchedSystem, HybridSystem
 
 __all__ = [
+    "BatchedSystem",
     "HybridArc",
     "HybridSolution",
     "HybridSystem",

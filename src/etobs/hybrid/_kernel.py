@@ -39,7 +39,6 @@ from etobs.compile.ccall import ccall
 from etobs.hybrid import _jitcache
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
-from etobs.hybrid.tableau import TABLEAUS
 
 # Status codes as plain integers (numba folds them as constants).
 RUNNING = int(Status.RUNNING)
@@ -167,6 +166,8 @@ _BODY = Path(__file__).with_name("_kernel_body.py")
 
 def tableau_constants(method: str) -> dict[str, object]:
     """The method's coefficients, laid out as the kernel template reads them."""
+    from etobs.hybrid.tableau import TABLEAUS  # imports scipy.integrate: only on a cache miss
+
     tab = TABLEAUS[method]
     dop853 = tab.dense_a is not None
     s = tab.stages
@@ -198,10 +199,11 @@ def build(method: str) -> Any:
     namespace = _jitcache.build(
         f"kernel_{method}",
         _BODY,
-        tableau_constants(method),
+        lambda: tableau_constants(method),
         {"jit": {}, "jit_nogil": {"nogil": True}},
         depends=tuple(
             here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "../compile/ccall.py")
         ),
+        packages=("scipy",),
     )
     return namespace["_kernel"]

@@ -16,15 +16,31 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import HybridSolution
 from etobs.hybrid.solver import check_inputs, peak_probe
 from etobs.hybrid.status import Status
-from etobs.hybrid.system import HybridSystem
+from etobs.hybrid.system import BatchedSystem, HybridSystem
+
+
+def solve_ivp(*args: Any, **kwargs: Any) -> Any:
+    """:func:`scipy.integrate.solve_ivp`, imported when the reference first runs.
+
+    ``scipy.integrate`` takes about half a second to import; the engine does not need it.
+    """
+    from scipy.integrate import solve_ivp as scipy_solve_ivp
+
+    return scipy_solve_ivp(*args, **kwargs)
+
+
+def brentq(*args: Any, **kwargs: Any) -> Any:
+    """:func:`scipy.optimize.brentq`, imported on first use (see :func:`solve_ivp`)."""
+    from scipy.optimize import brentq as scipy_brentq
+
+    return scipy_brentq(*args, **kwargs)
+
 
 # After brentq (or solve_ivp's own location), the event time is moved right by at most
 # this many xtol/4 until an event function is >= 0 there, so the state is in the jump
@@ -33,7 +49,7 @@ _NUDGES = 64
 
 
 def solve_reference(
-    system: HybridSystem,
+    system: HybridSystem | BatchedSystem,
     x0: Any,
     t_span: Any,
     *,
@@ -43,8 +59,11 @@ def solve_reference(
     """Solve each run with ``solve_ivp``; same arguments and result as :func:`~etobs.hybrid.solve`.
 
     ``options.method`` is ignored (``solve_ivp``'s ``DOP853`` is always used) and
-    ``max_steps`` is checked between flow segments only.
+    ``max_steps`` is checked between flow segments only. A :class:`HybridSystem`'s
+    Python functions are called as they are, uncompiled.
     """
+    if isinstance(system, HybridSystem):
+        system = system.batched(compiled=False)
     X, t0, t_end = check_inputs(system, x0, t_span)
     opts = options or SolverOptions()
     save = save or SaveAt()
@@ -84,7 +103,7 @@ class _Run:
 
     def __init__(
         self,
-        system: HybridSystem,
+        system: BatchedSystem,
         b: int,
         x0: np.ndarray,
         t0: float,

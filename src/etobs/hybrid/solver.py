@@ -26,14 +26,13 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.errors import InputError, ModelError
+from etobs.errors import InputError, InputTypeError, ModelError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.rootfind import bracket_root
 from etobs.hybrid.solution import HybridSolution
 from etobs.hybrid.status import Status
-from etobs.hybrid.system import HybridSystem
-from etobs.hybrid.tableau import TABLEAUS
+from etobs.hybrid.system import BatchedSystem, HybridSystem
 
 # Step-size controller constants, as in Hairer, Nørsett & Wanner (1993), II.4.
 SAFETY = 0.9  # keep the next error estimate below the tolerance with margin
@@ -41,10 +40,14 @@ MIN_FACTOR = 0.2  # never shrink a step by more than 5x at once
 MAX_FACTOR = 10.0  # never grow a step by more than 10x at once
 
 
+#: The solvers of :func:`solve`.
+BACKENDS = ("auto", "engine", "numpy", "scipy")
+
+
 def check_inputs(system: Any, x0: Any, t_span: Any) -> tuple[np.ndarray, float, float]:
-    """Validate the arguments shared by both backends; return ``(x0 (B, n), t0, t_end)``."""
-    if not isinstance(system, HybridSystem):
-        raise InputError(f"`system` must be a HybridSystem; got {type(system).__name__}")
+    """Validate the arguments shared by the batched solvers; return ``(x0 (B, n), t0, t_end)``."""
+    if not isinstance(system, BatchedSystem):
+        raise InputTypeError(f"`system` must be a HybridSystem; got {type(system).__name__}")
     t0, t_end = span(t_span)
     return v.batch("x0", x0, system.n), t0, t_end
 
@@ -63,18 +66,20 @@ def span(t_span: Any) -> tuple[float, float]:
 
 
 def solve(
-    system: HybridSystem,
+    system: HybridSystem | BatchedSystem,
     x0: Any,
     t_span: Any,
     *,
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
+    backend: str = "auto",
 ) -> HybridSolution:
-    """Solve a batch of runs of a hybrid system with the fast solver.
+    """Solve a batch of runs of a hybrid system (the front door of :mod:`etobs.hybrid`).
 
     Parameters
     ----------
     system : HybridSystem
+        Written for one run (see :class:`~etobs.hybrid.HybridSystem`).
     x0 : array_like, shape (n,) or (B, n)
         Initial state of each run.
     t_span : (float, float)
@@ -82,6 +87,11 @@ def solve(
     options : SolverOptions, optional
     save : SaveAt, optional
         What to keep (default: the full hybrid arcs).
+    backend : {"auto", "engine", "numpy", "scipy"}
+        ``"auto"`` and ``"engine"``: the compiled engine (:mod:`etobs.hybrid.compiled`);
+        ``"numpy"``: the batched numpy solver of this module; ``"scipy"``: the
+        ``solve_ivp`` reference, which calls the Python functions as they are. All
+        follow the contract in the module docstring.
 
     Returns
     -------
@@ -95,15 +105,35 @@ def solve(
     >>> from etobs.hybrid import HybridSystem, solve
     >>> ball = HybridSystem(
     ...     n=2, n_rules=1,
-    ...     flow=lambda t, x: np.stack([x[:, 1], -9.81 + 0 * x[:, 0]], axis=1),
-    ...     guard=lambda t, x: np.where(x[:, 1] < 0, -x[:, 0], -1.0)[:, None],
-    ...     jump=lambda k, t, x: np.stack([0 * x[:, 0], -0.5 * x[:, 1]], axis=1),
+    ...     flow=lambda t, x: np.array([x[1], -9.81]),
+    ...     guard=lambda t, x: np.array([-x[0] if x[1] < 0 else -1.0]),
+    ...     jump=lambda k, t, x: np.array([0.0, -0.5 * x[1]]),
     ... )
-    >>> sol = solve(ball, [1.0, 0.0], (0.0, 1.0))
-    >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
-    0.451524
+    >>> [round(float(solve(ball, [1.0, 0.0], (0.0, 1.0), backend=b).jumps.t[0]), 6)
+    ...  for b in ("engine", "numpy", "scipy")]  # sqrt(2 / 9.81)
+    [0.451524, 0.451524, 0.451524]
 
     """
+    if backend not in BACKENDS:
+        raise InputError(f"`backend` must be one of {BACKENDS}; got {backend!r}")
+    if isinstance(system, HybridSystem):
+        if backend in ("auto", "engine"):
+            from etobs.hybrid.compiled import solve_compiled
+
+            params = system.params if system.params.size else None
+            return solve_compiled(system.compiled(), x0, t_span, params=params, options=options, save=save)
+        if backend == "scipy":
+            from etobs.hybrid.reference import solve_reference
+
+            return solve_reference(system, x0, t_span, options=options, save=save)
+        system = system.batched(compiled=True)
+    elif isinstance(system, BatchedSystem):
+        if backend == "scipy":
+            from etobs.hybrid.reference import solve_reference
+
+            return solve_reference(system, x0, t_span, options=options, save=save)
+        if backend == "engine":
+            raise InputError("backend='engine' needs a HybridSystem written for one run; got a BatchedSystem")
     x, t0, t_end = check_inputs(system, x0, t_span)
     return _FastSolver(system, x, t0, t_end, options or SolverOptions(), save or SaveAt()).run()
 
@@ -118,7 +148,7 @@ def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
 class _FastSolver:
     def __init__(
         self,
-        system: HybridSystem,
+        system: BatchedSystem,
         x0: np.ndarray,
         t0: float,
         t_end: float,
@@ -126,6 +156,8 @@ class _FastSolver:
         save: SaveAt,
     ) -> None:
         self.sys, self.opts, self.t0, self.t_end = system, opts, t0, t_end
+        from etobs.hybrid.tableau import TABLEAUS  # imports scipy.integrate: only for this solver
+
         self.tab = TABLEAUS[opts.method]
         self.err_exp = -1.0 / (self.tab.error_order + 1)
         b, n = x0.shape

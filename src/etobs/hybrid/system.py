@@ -3,25 +3,52 @@
 The system is ``x' = flow(t, x)`` while every event function is negative, and
 ``x+ = jump(k, t, x)`` when event function ``k`` is ``>= 0``. The solvers know nothing
 else about it.
+
+Users write :class:`HybridSystem` for one run, on 1-D arrays, like every function in
+etobs; the engine compiles it (:meth:`HybridSystem.compiled`), the scipy reference calls
+it as it is. :class:`BatchedSystem` is the same system with the runs on axis 0, the form
+of the batched numpy solver (:meth:`HybridSystem.batched` derives it).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from etobs import _validate as v
+from etobs.errors import InputError, ModelError
 
-FlowFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
-GuardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
-JumpFn = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
+if TYPE_CHECKING:
+    from etobs.hybrid.compiled import CompiledSystem
+
+FlowFn = Callable[..., Any]
+GuardFn = Callable[..., Any]
+JumpFn = Callable[..., Any]
+
+
+def _names(n_rules: int, rule_names: tuple[str, ...]) -> tuple[str, ...]:
+    if not rule_names:
+        return tuple(f"rule{k}" for k in range(n_rules))
+    if len(rule_names) != n_rules:
+        raise InputError(f"`rule_names` has {len(rule_names)} names; expected n_rules={n_rules}")
+    return tuple(rule_names)
+
+
+def _check_sizes(n: int, n_rules: int, n_flow: int | None) -> None:
+    v.integer("n", n, lower=1)
+    v.integer("n_rules", n_rules, lower=0)
+    if n_flow is not None:
+        v.integer("n_flow", n_flow, lower=1)
+        if n_flow > n:
+            raise InputError(f"`n_flow` must be <= n = {n}; got {n_flow}")
 
 
 @dataclass(frozen=True)
 class HybridSystem:
-    """A batched hybrid system with ``n_rules`` jump rules.
+    """A hybrid system with ``n_rules`` jump rules, written for one run.
 
     Parameters
     ----------
@@ -30,19 +57,199 @@ class HybridSystem:
     n_rules : int
         Number of jump rules (event functions).
     flow : callable
-        ``flow(t, x) -> dx``; ``t`` has shape ``(B,)``, ``x`` and ``dx`` shape ``(B, n)``.
+        ``flow(t, x) -> x'``: ``t`` a float, ``x`` of shape ``(n,)``; returns shape ``(n,)``.
     guard : callable
-        ``guard(t, x) -> g`` of shape ``(B, n_rules)``; rule ``k`` may jump where
-        ``g[:, k] >= 0`` and the system flows while every ``g < 0``.
+        ``guard(t, x) -> g`` of shape ``(n_rules,)``; rule ``k`` may jump where
+        ``g[k] >= 0`` and the system flows while every ``g < 0``.
     jump : callable
-        ``jump(k, t, x) -> x+`` applies rule ``k`` to the rows given, shape ``(M, n)``.
+        ``jump(k, t, x) -> x+``: rule ``k``'s jump map, shape ``(n,)``.
     rule_names : tuple of str, optional
         Names of the rules, used in messages and logs.
     n_flow : int, optional
         When given, only the entries ``0 .. n_flow-1`` change along flows; the others
-        (counters, buffers, identifiers) have zero derivative. The fast solver then
+        (counters, buffers, identifiers) have zero derivative. The numpy solver then
         leaves them out of its error norm, so that they do not dilute the tolerance.
+    params : array_like, optional
+        A parameter vector passed to every function as its last argument
+        (``flow(t, x, p)``, ``guard(t, x, p)``, ``jump(k, t, x, p)``); numbers kept here
+        change without a recompile.
 
+    Write the functions with numpy or ``math``: the engine compiles them (and the Python
+    functions they call); they may return a 1-D array or a tuple of floats.
+
+    Examples
+    --------
+    A bouncing ball, ``x = (height, velocity)``, restitution ``p[0]``:
+
+    >>> import numpy as np
+    >>> from etobs.hybrid import HybridSystem, solve
+    >>> ball = HybridSystem(
+    ...     n=2, n_rules=1,
+    ...     flow=lambda t, x, p: np.array([x[1], -9.81]),
+    ...     guard=lambda t, x, p: np.array([-x[0] if x[1] < 0 else -1.0]),
+    ...     jump=lambda k, t, x, p: np.array([0.0, -p[0] * x[1]]),
+    ...     params=[0.5],
+    ... )
+    >>> sol = solve(ball, [1.0, 0.0], (0.0, 1.0))
+    >>> round(float(sol.jumps.t[0]), 6)  # sqrt(2 / 9.81)
+    0.451524
+
+    """
+
+    n: int
+    n_rules: int
+    flow: FlowFn
+    guard: GuardFn
+    jump: JumpFn
+    rule_names: tuple[str, ...] = ()
+    n_flow: int | None = None
+    params: Any = None
+    _compiled: dict[str, Any] = field(init=False, repr=False, compare=False, default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _check_sizes(self.n, self.n_rules, self.n_flow)
+        v.function("flow", self.flow)
+        v.function("guard", self.guard)
+        v.function("jump", self.jump)
+        object.__setattr__(self, "rule_names", _names(self.n_rules, tuple(self.rule_names)))
+        object.__setattr__(self, "params", v.params("params", self.params))
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_compiled": {}}  # compiled functions stay in their process
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+
+    def call_flow(self, t: float, x: np.ndarray) -> Any:
+        """``flow`` of one run, with ``params`` when there are any."""
+        return self.flow(t, x, self.params) if self.params.size else self.flow(t, x)
+
+    def call_guard(self, t: float, x: np.ndarray) -> Any:
+        """``guard`` of one run, with ``params`` when there are any."""
+        return self.guard(t, x, self.params) if self.params.size else self.guard(t, x)
+
+    def call_jump(self, k: int, t: float, x: np.ndarray) -> Any:
+        """``jump`` of one run, with ``params`` when there are any."""
+        return self.jump(k, t, x, self.params) if self.params.size else self.jump(k, t, x)
+
+    def compiled(self) -> CompiledSystem:
+        """The system for the engine (its functions compiled; memoized)."""
+        if "engine" not in self._compiled:
+            from etobs.hybrid.compiled import compile_system
+
+            self._compiled["engine"] = compile_system(
+                self.flow,
+                self.guard,
+                self.jump,
+                self.n,
+                self.n_rules,
+                n_params=self.params.size,
+                rule_names=self.rule_names,
+            )
+        return self._compiled["engine"]
+
+    def batched(self, compiled: bool) -> BatchedSystem:
+        """The same system with the runs on axis 0, for the batched numpy solver.
+
+        ``compiled=True`` calls the engine's compiled functions in one compiled loop over
+        the rows; ``False`` calls the Python functions row by row.
+        """
+        if compiled:
+            fns = self.compiled().keep
+            run = _CompiledRows(fns, self.params)
+            flow, guard, jump = run.caller(0, self.n), run.caller(1, max(self.n_rules, 1)), run.jumper(self.n)
+            if not self.n_rules:
+                guard = _no_rules
+        else:
+            flow = _python_rows(self.call_flow, "flow", self.n)
+            guard = _python_rows(self.call_guard, "guard", self.n_rules)
+            jump = _python_jump(self.call_jump, self.n)
+        return BatchedSystem(
+            n=self.n,
+            n_rules=self.n_rules,
+            flow=flow,
+            guard=guard,
+            jump=jump,
+            rule_names=self.rule_names,
+            n_flow=self.n_flow,
+        )
+
+
+def _no_rules(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.empty((x.shape[0], 0))
+
+
+def _one(name: str, out: Any, n: int) -> np.ndarray:
+    arr = np.asarray(out, dtype=float)
+    if arr.shape != (n,):
+        raise ModelError(f"`{name}` returned shape {arr.shape} for one run; expected ({n},)")
+    return arr
+
+
+def _python_rows(fn: Callable[..., Any], name: str, n: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    def rows(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        out = np.empty((x.shape[0], n))
+        for b in range(x.shape[0]):
+            out[b] = _one(name, fn(float(t[b]), x[b]), n)
+        return out
+
+    return rows
+
+
+def _python_jump(fn: Callable[..., Any], n: int) -> Callable[[int, np.ndarray, np.ndarray], np.ndarray]:
+    def rows(k: int, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        out = np.empty((x.shape[0], n))
+        for b in range(x.shape[0]):
+            out[b] = _one("jump", fn(int(k), float(t[b]), x[b]), n)
+        return out
+
+    return rows
+
+
+class _CompiledRows:
+    """Batched calls of the engine's compiled flow, guard and jump (one compiled loop)."""
+
+    def __init__(self, fns: tuple[Any, ...], params: np.ndarray) -> None:
+        self.fns = fns
+        self.params = np.array(params, dtype=float)
+
+    def _call(self, slot: int, k: int, n_out: int, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        from etobs.compile.batch import batch_call
+        from etobs.compile.functions import FAILURES
+
+        B = x.shape[0]
+        out = np.empty((B, n_out))
+        empty = np.zeros((B, 0))
+        xs = np.ascontiguousarray(x, dtype=float)
+        st = batch_call(
+            self.fns[slot].address,
+            k,
+            np.ascontiguousarray(t, dtype=float),
+            xs,
+            empty,
+            empty,
+            empty,
+            self.params,
+            out,
+        )
+        if st != 1:
+            raise ModelError(f"`{self.fns[slot].name}` {FAILURES.get(st, f'failed ({st})')}")
+        return out
+
+    def caller(self, slot: int, n_out: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        return lambda t, x: self._call(slot, 0, n_out, t, x)
+
+    def jumper(self, n: int) -> Callable[[int, np.ndarray, np.ndarray], np.ndarray]:
+        return lambda k, t, x: self._call(2, int(k), n, t, x)
+
+
+@dataclass(frozen=True)
+class BatchedSystem:
+    """A hybrid system with the runs on axis 0 (the batched numpy solver's form).
+
+    ``flow(t, x) -> dx`` with ``t`` of shape ``(B,)`` and ``x``, ``dx`` of shape
+    ``(B, n)``; ``guard(t, x) -> g`` of shape ``(B, n_rules)``; ``jump(k, t, x) -> x+``
+    applies rule ``k`` to the rows given. Other fields as :class:`HybridSystem`.
     """
 
     n: int
@@ -54,22 +261,8 @@ class HybridSystem:
     n_flow: int | None = None
 
     def __post_init__(self) -> None:
-        v.integer("n", self.n, lower=1)
-        v.integer("n_rules", self.n_rules, lower=0)
-        if self.n_flow is not None:
-            v.integer("n_flow", self.n_flow, lower=1)
-            if self.n_flow > self.n:
-                from etobs.errors import InputError
-
-                raise InputError(f"`n_flow` must be <= n = {self.n}; got {self.n_flow}")
+        _check_sizes(self.n, self.n_rules, self.n_flow)
         v.function("flow", self.flow)
         v.function("guard", self.guard)
         v.function("jump", self.jump)
-        if not self.rule_names:
-            object.__setattr__(self, "rule_names", tuple(f"rule{k}" for k in range(self.n_rules)))
-        elif len(self.rule_names) != self.n_rules:
-            from etobs.errors import InputError
-
-            raise InputError(
-                f"`rule_names` has {len(self.rule_names)} names; expected n_rules={self.n_rules}"
-            )
+        object.__setattr__(self, "rule_names", _names(self.n_rules, tuple(self.rule_names)))
