@@ -59,7 +59,7 @@ I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK = 0, 1, 2, 3, 4
 FLOW, GUARD, JUMP = 1, 2, 3
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _failed(args, slot, st, out):
     """Record the run's first failure (``16 * slot + st`` unless ``st`` is a code) and poison ``out``."""
     if args[2][0] == 0:
@@ -68,7 +68,7 @@ def _failed(args, slot, st, out):
         out[i] = np.nan
 
 
-@numba.njit
+@numba.njit(inline="always")
 def flow(t, x, p, args, dx):
     """``dx = x'`` by the system's flow function (``args = ((addresses, ia, cf), work, failure)``)."""
     a = args[0]
@@ -77,7 +77,7 @@ def flow(t, x, p, args, dx):
         _failed(args, FLOW, st, dx)
 
 
-@numba.njit
+@numba.njit(inline="always")
 def guard(t, x, p, args, g):
     """``g`` = every rule's event function."""
     a = args[0]
@@ -86,7 +86,7 @@ def guard(t, x, p, args, g):
         _failed(args, GUARD, st, g)
 
 
-@numba.njit
+@numba.njit(inline="always")
 def jump(k, t, x, p, args):
     """Apply rule ``k``'s jump map to ``x`` in place."""
     a = args[0]
