@@ -60,40 +60,37 @@ FLOW, GUARD, JUMP = 1, 2, 3
 
 
 @numba.njit(inline="always")
-def _failed(args, slot, st, out):
-    """Record the run's first failure (``16 * slot + st`` unless ``st`` is a code) and poison ``out``."""
-    if args[2][0] == 0:
-        args[2][0] = st if st >= 16 else 16 * slot + st
-    for i in range(out.shape[0]):
-        out[i] = np.nan
+def _system(slot, k, t, x, p, args, out):
+    """Call the system's function ``slot`` (FLOW, GUARD, JUMP) by address into ``out``.
+
+    ``args = ((addresses, ia, cf), work, failure)``. On failure, record the run's first
+    failure (``16 * slot + st`` unless ``st`` is already a code) and poison ``out``.
+    """
+    a = args[0]
+    st = ccall(a[0][slot - 1], k, t, x, a[2], args[1], a[2], a[1], p, out)
+    if st != 1:
+        if args[2][0] == 0:
+            args[2][0] = st if st >= 16 else 16 * slot + st
+        for i in range(out.shape[0]):
+            out[i] = np.nan
 
 
 @numba.njit(inline="always")
 def flow(t, x, p, args, dx):
-    """``dx = x'`` by the system's flow function (``args = ((addresses, ia, cf), work, failure)``)."""
-    a = args[0]
-    st = ccall(a[0][0], 0, t, x, a[2], args[1], a[2], a[1], p, dx)
-    if st != 1:
-        _failed(args, FLOW, st, dx)
+    """``dx = x'`` by the system's flow function."""
+    _system(FLOW, 0, t, x, p, args, dx)
 
 
 @numba.njit(inline="always")
 def guard(t, x, p, args, g):
     """``g`` = every rule's event function."""
-    a = args[0]
-    st = ccall(a[0][1], 0, t, x, a[2], args[1], a[2], a[1], p, g)
-    if st != 1:
-        _failed(args, GUARD, st, g)
+    _system(GUARD, 0, t, x, p, args, g)
 
 
 @numba.njit(inline="always")
 def jump(k, t, x, p, args):
     """Apply rule ``k``'s jump map to ``x`` in place."""
-    a = args[0]
-    w = args[1]
-    st = ccall(a[0][2], k, t, x, a[2], w, a[2], a[1], p, x)
-    if st != 1:
-        _failed(args, JUMP, st, x)
+    _system(JUMP, k, t, x, p, args, x)
 
 
 flow_call, guard_call, jump_call = flow, guard, jump

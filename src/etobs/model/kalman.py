@@ -105,18 +105,23 @@ def extended_kalman_filter(
     return Observer(f_o=f_o, n_z=n + n * n, psi=psi, name=name)
 
 
+def _perturbed(x: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """``x`` moved up and down along ``e_j`` by the central-difference step."""
+    step = _ROOT_EPS * max(1.0, abs(x[j]))
+    up = x.copy()
+    up[j] += step
+    down = x.copy()
+    down[j] -= step
+    return up, down
+
+
 def _difference_jac_f(f: Field, n: int) -> Callable[[float, np.ndarray, np.ndarray], np.ndarray]:
     """Central-difference Jacobian ``df/dx`` of a one-run ``f(t, x, u)``, shape ``(n, n)``."""
-    root_eps = _ROOT_EPS
 
     def jac(t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         J = np.empty((n, n))
         for j in range(n):
-            step = root_eps * max(1.0, abs(x[j]))
-            up = x.copy()
-            up[j] += step
-            down = x.copy()
-            down[j] -= step
+            up, down = _perturbed(x, j)
             col = (f(t, up, u) - f(t, down, u)) / (up[j] - down[j])
             for i in range(n):
                 J[i, j] = col[i]
@@ -127,16 +132,11 @@ def _difference_jac_f(f: Field, n: int) -> Callable[[float, np.ndarray, np.ndarr
 
 def _difference_jac_h(h: Output, n: int, n_y: int) -> Callable[[np.ndarray], np.ndarray]:
     """Central-difference Jacobian ``dh/dx`` of a one-run ``h(x)``, shape ``(n_y, n)``."""
-    root_eps = _ROOT_EPS
 
     def jac(x: np.ndarray) -> np.ndarray:
         J = np.empty((n_y, n))
         for j in range(n):
-            step = root_eps * max(1.0, abs(x[j]))
-            up = x.copy()
-            up[j] += step
-            down = x.copy()
-            down[j] -= step
+            up, down = _perturbed(x, j)
             col = (h(up) - h(down)) / (up[j] - down[j])
             for i in range(n_y):
                 J[i, j] = col[i]
