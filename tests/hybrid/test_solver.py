@@ -298,7 +298,9 @@ def test_wrong_shape_is_a_model_error_status_on_the_engine(name):
 def test_wrong_shape_raises_a_model_error_on_the_numpy_solver(name):
     # the numpy solver calls the engine's compiled functions row by row: their status
     # becomes the error
-    with pytest.raises(ModelError, match=f"^`{name}` returned the wrong shape"):
+    n_out = 1 if name == "guard" else 2
+    match = f"^`{name}` returned the wrong shape: expected a 1-D result of length {n_out} for one run"
+    with pytest.raises(ModelError, match=match):
         solve(_bad_system(name), [0.0, 0.0], (0.0, 1.0), backend="numpy")
 
 

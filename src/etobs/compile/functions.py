@@ -34,6 +34,14 @@ RAISED, OK, BAD_SHAPE = 0, 1, 2
 FAILURES = {RAISED: "raised an exception (numba printed it above)", BAD_SHAPE: "returned the wrong shape"}
 
 
+def describe_failure(name: str, status: int, n_out: int | None = None) -> str:
+    """A sentence naming the function ``name`` and how it failed (a status of :data:`FAILURES`)."""
+    text = f"`{name}` {FAILURES.get(status, f'failed (status {status})')}"
+    if status == BAD_SHAPE and n_out is not None:
+        text += f": expected a 1-D result of length {n_out} for one run"
+    return text
+
+
 @dataclass(frozen=True)
 class FunctionSpec:
     """How the engine calls one kind of user function.

@@ -59,9 +59,9 @@ class ModelCalls:
         out = np.empty((B, n_out))
         st = batch_call(cf.address, 0, np.ascontiguousarray(t, dtype=float), *ins, params, out)
         if st != 1:
-            from etobs.compile.functions import FAILURES
+            from etobs.compile.functions import describe_failure
 
-            raise ModelError(f"`{name}` {FAILURES.get(st, f'failed ({st})')} during the simulation")
+            raise ModelError(describe_failure(name, st, n_out) + " during the simulation")
         return out
 
     def f_p(self, t: np.ndarray, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -91,12 +91,11 @@ class CompiledSystem:
 
     def failure(self, code: int) -> str:
         """The failing function and how it failed, from a run's ``error_code``."""
-        from etobs.compile.functions import FAILURES
+        from etobs.compile.functions import describe_failure
 
         slot, how = divmod(int(code), 16)
         names = self.function_names
-        name = names[slot - 1] if 0 < slot <= len(names) else f"function {slot}"
-        return f"`{name}` {FAILURES.get(how, f'failed ({how})')}"
+        return describe_failure(names[slot - 1] if 0 < slot <= len(names) else f"function {slot}", how)
 
 
 def compile_system(

@@ -215,7 +215,7 @@ class _CompiledRows:
 
     def _call(self, slot: int, k: int, n_out: int, t: np.ndarray, x: np.ndarray) -> np.ndarray:
         from etobs.compile.batch import batch_call
-        from etobs.compile.functions import FAILURES
+        from etobs.compile.functions import describe_failure
 
         B = x.shape[0]
         out = np.empty((B, n_out))
@@ -233,7 +233,7 @@ class _CompiledRows:
             out,
         )
         if st != 1:
-            raise ModelError(f"`{self.fns[slot].name}` {FAILURES.get(st, f'failed ({st})')}")
+            raise ModelError(describe_failure(self.fns[slot].name, st, n_out))
         return out
 
     def caller(self, slot: int, n_out: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
