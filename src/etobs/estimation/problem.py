@@ -159,7 +159,7 @@ class EstimationProblem:
 
     @property
     def extended(self) -> bool:
-        """Whether the problem uses an extension the compiled backend does not model."""
+        """Whether the problem goes beyond the base setting (input nodes, copy hold, a network)."""
         return bool(self.input_nodes) or self.hold != "output" or self.network is not None
 
     def calls(self, compiled: bool | None = None) -> ModelCalls:
