@@ -193,6 +193,15 @@ def test_fingerprint_changes_with_closed_over_values_and_called_helpers(monkeypa
     k = np.ones(2)
     assert fingerprint(lambda x: k * 2.0) != fingerprint(lambda x: k * 3.0)  # another constant
 
+    def with_defaults(d, kw):
+        def f(x, a=d, *, b=kw):
+            return x * a + b
+
+        return f
+
+    assert fingerprint(with_defaults(1.0, 2.0)) != fingerprint(with_defaults(1.5, 2.0))  # a default
+    assert fingerprint(with_defaults(1.0, 2.0)) != fingerprint(with_defaults(1.0, 2.5))  # a keyword-only one
+
     glob = fingerprint(_uses_global_helper)
     monkeypatch.setattr(sys.modules[__name__], "_scale", _triple)  # the global helper changes
     assert fingerprint(_uses_global_helper) != glob

@@ -4,7 +4,8 @@ numba compiles a function's globals and closure variables as constants, and call
 functions it refers to. Two functions with the same fingerprint therefore compile to
 the same machine code: the hash covers the bytecode and constants of the function and
 of its nested code, its defaults, the values of its closure cells and of the globals
-its code names (arrays by dtype, shape and bytes; numbers by ``repr``), and, through
+its code names (arrays by dtype, shape and bytes; numbers by ``repr``), its default and
+keyword-only default values, and, through
 them, every Python or numba function it calls. Modules count by name, and modules of
 the user's own files (outside the interpreter's prefix) also by the size and
 modification time of their file, since numba freezes module attributes too.
@@ -62,6 +63,9 @@ def _feed(h: Any, obj: Any, seen: set[int]) -> None:
         seen.add(id(obj))
         _code(h, obj.__code__)
         for d in obj.__defaults__ or ():
+            _feed(h, d, seen)
+        for name, d in sorted((obj.__kwdefaults__ or {}).items()):
+            h.update(name.encode())
             _feed(h, d, seen)
         for cell in obj.__closure__ or ():
             _feed(h, cell.cell_contents, seen)
