@@ -5,6 +5,7 @@ import json
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import numba
@@ -178,7 +179,12 @@ def test_fingerprint_is_equal_for_equal_content():
     f = lambda x: k1 * 2.0  # noqa: E731
     g = lambda x: k1 * 2.0  # noqa: E731  (another line, same content)
     assert fingerprint(f) == fingerprint(g)
-    assert fingerprint(numba.njit(_uses_global_helper)) == fingerprint(_uses_global_helper)
+    # a user's @njit function compiles with its own options (etobs compiles plain functions
+    # with error_model="numpy"), so the options count
+    assert fingerprint(numba.njit(_uses_global_helper)) == fingerprint(numba.njit(_uses_global_helper))
+    assert fingerprint(numba.njit(_uses_global_helper)) != fingerprint(
+        numba.njit(fastmath=True)(_uses_global_helper)
+    )
 
 
 def test_fingerprint_changes_with_closed_over_values_and_called_helpers(monkeypatch):
@@ -201,6 +207,16 @@ def test_fingerprint_changes_with_closed_over_values_and_called_helpers(monkeypa
 
     assert fingerprint(with_defaults(1.0, 2.0)) != fingerprint(with_defaults(1.5, 2.0))  # a default
     assert fingerprint(with_defaults(1.0, 2.0)) != fingerprint(with_defaults(1.0, 2.5))  # a keyword-only one
+
+    cfg = types.ModuleType("cfg")  # numba freezes module attributes too
+    cfg.K = 2.0
+
+    def reads_module(t, x):
+        return x * cfg.K
+
+    before = fingerprint(reads_module)
+    cfg.K = 5.0
+    assert fingerprint(reads_module) != before
 
     glob = fingerprint(_uses_global_helper)
     monkeypatch.setattr(sys.modules[__name__], "_scale", _triple)  # the global helper changes

@@ -13,6 +13,7 @@ imported, and a changed function (or a changed constant it reads) gets a new key
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 from typing import Any
@@ -58,7 +59,8 @@ def _locator_class(base: type) -> type:
             return self._key
 
         def get_disambiguator(self) -> str:
-            return self._key[:24]
+            # the whole key (the function's hash and how it is called) names the file
+            return hashlib.sha256(self._key.encode()).hexdigest()[:24]
 
         @classmethod
         def from_function(cls, py_func: Any, py_file: str) -> Any:

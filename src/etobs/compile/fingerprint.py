@@ -6,22 +6,18 @@ the same machine code: the hash covers the bytecode and constants of the functio
 of its nested code, its defaults, the values of its closure cells and of the globals
 its code names (arrays by dtype, shape and bytes; numbers by ``repr``), its default and
 keyword-only default values, and, through
-them, every Python or numba function it calls. Modules count by name, and modules of
-the user's own files (outside the interpreter's prefix) also by the size and
-modification time of their file, since numba freezes module attributes too.
+them, every Python or numba function it calls (with a numba function's options).
+Modules count by name and by the values of the attributes the code may read
+(``mod.CONST``: numba freezes module attributes too).
 """
 
 from __future__ import annotations
 
 import hashlib
-import sys
 import types
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-_PREFIXES = tuple(str(Path(p).resolve()) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
 
 
 def fingerprint(fn: Any) -> str:
@@ -51,9 +47,35 @@ def _code(h: Any, code: types.CodeType) -> None:
             h.update(repr(const).encode())
 
 
+def _module(h: Any, mod: types.ModuleType, names: set[str], seen: set[int], depth: int) -> None:
+    """Hash a module the code reads attributes of: its name and those attributes' values.
+
+    ``mod.CONST`` is frozen by numba like any global, so every attribute the code may
+    read counts by its value.
+    """
+    h.update(f"module {mod.__name__}".encode())
+    if id(mod) in seen or depth > 2:
+        return
+    seen.add(id(mod))
+    for name in sorted(names):
+        value = getattr(mod, name, _MISSING)
+        if value is _MISSING:
+            continue
+        h.update(name.encode())
+        if isinstance(value, types.ModuleType):
+            _module(h, value, names, seen, depth + 1)
+        else:
+            _feed(h, value, seen)
+    seen.discard(id(mod))
+
+
+_MISSING = object()
+
+
 def _feed(h: Any, obj: Any, seen: set[int]) -> None:
-    py = getattr(obj, "py_func", None)  # a numba dispatcher: what it compiles
+    py = getattr(obj, "py_func", None)  # a numba dispatcher: what it compiles, and how
     if py is not None:
+        h.update(repr(sorted(getattr(obj, "targetoptions", {}).items())).encode())
         obj = py
     if isinstance(obj, types.FunctionType):
         h.update(b"function")
@@ -67,25 +89,26 @@ def _feed(h: Any, obj: Any, seen: set[int]) -> None:
         for name, d in sorted((obj.__kwdefaults__ or {}).items()):
             h.update(name.encode())
             _feed(h, d, seen)
+        names = _names(obj.__code__)
+
+        def value(v: Any) -> None:
+            if isinstance(v, types.ModuleType):
+                _module(h, v, names, seen, 0)
+            else:
+                _feed(h, v, seen)
+
         for cell in obj.__closure__ or ():
-            _feed(h, cell.cell_contents, seen)
+            value(cell.cell_contents)
         builtins = vars(__builtins__) if isinstance(__builtins__, types.ModuleType) else __builtins__
-        for name in sorted(_names(obj.__code__)):
+        for name in sorted(names):
             h.update(name.encode())
             if name in obj.__globals__:
-                _feed(h, obj.__globals__[name], seen)
+                value(obj.__globals__[name])
             elif name in builtins:
                 h.update(b"builtin")
         return
     if isinstance(obj, types.ModuleType):
         h.update(f"module {obj.__name__}".encode())
-        file = getattr(obj, "__file__", None)
-        if file and not str(Path(file).resolve()).startswith(_PREFIXES):
-            try:
-                st = Path(file).stat()
-                h.update(f"{st.st_size} {st.st_mtime_ns}".encode())
-            except OSError:
-                pass
         return
     if isinstance(obj, np.ndarray):
         h.update(f"ndarray {obj.dtype.str} {obj.shape}".encode())

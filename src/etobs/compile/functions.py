@@ -92,7 +92,7 @@ class CompiledFunction:
 
 
 #: Version of the cached wrappers' layout (part of the cache key).
-_FORMAT = 3
+_FORMAT = 4
 _MEMO: dict[str, CompiledFunction] = {}
 _LOCK = threading.Lock()
 
