@@ -93,6 +93,28 @@ def _node():
         (lambda: robot_arm(L=np.ones((2, 4))), InputError, r"`L` has shape \(2, 4\); expected \(4, 2\)"),
         (lambda: robot_arm(sigma=(1, 2, 3)), InputError, r"`sigma` must have 2 entries; got 3"),
         (lambda: SolverOptions(first_step=0.0), InputError, r"`first_step` must be > 0; got 0"),
+        (
+            lambda: Plant(lambda t, x, u, v, p: x, lambda x, p: x, n_x=1, n_y=1, params=[np.nan]),
+            InputError,
+            r"`params` must be finite; got \[nan\]",
+        ),
+        (
+            lambda: HybridSystem(
+                1, 0, lambda t, x, p: x, lambda t, x, p: x, lambda k, t, x, p: x, params=[[1.0]]
+            ),
+            InputError,
+            r"`params` must be a vector \(1-D\); got an array of shape \(1, 1\)",
+        ),
+        (
+            lambda: solve(
+                HybridSystem(1, 0, lambda t, x: x, lambda t, x: x, lambda k, t, x: x),
+                [0.0],
+                (0, 1),
+                backend="jax",
+            ),
+            InputError,
+            r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\)",
+        ),
         (lambda: solve("system", [0.0], (0, 1)), InputTypeError, r"`system` must be a HybridSystem; got str"),
         (
             lambda: solve_reference("system", [0.0], (0, 1)),
