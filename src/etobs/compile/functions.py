@@ -94,6 +94,7 @@ class CompiledFunction:
 #: Version of the cached wrappers' layout (part of the cache key).
 _FORMAT = 4
 _MEMO: dict[str, CompiledFunction] = {}
+_MEMO_MODULES: dict[str, tuple[CompiledFunction, ...]] = {}
 _LOCK = threading.Lock()
 
 
@@ -146,20 +147,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
         }
         exec(compile(source, "<etobs wrapper>", "exec"), namespace)
         try:
-            try:
-                cf = _cfunc(namespace["wrapper"], cached)
-            except Exception as exc:
-                if not cached:
-                    raise
-                # a cache entry that cannot be loaded (written by another version, say)
-                # must not stop the user: compile in memory and say so
-                cf = _cfunc(namespace["wrapper"], False)
-                warnings.warn(
-                    f"etobs: could not load the cached code of `{name}` ({_reason(exc)}); compiled it "
-                    "again. Deleting the cache folder (see etobs.compile.cache) is always safe",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
+            cf = _load_or_compile(namespace["wrapper"], cached, f"`{name}`")
         except Exception as exc:  # numba raises many types; all mean "cannot compile"
             raise ModelError(
                 f"`{name}` cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
@@ -168,6 +156,79 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
         out = CompiledFunction(name, int(cf.address), cf)
         _MEMO[key] = out
         return out
+
+
+def compile_module(
+    text: str, users: dict[str, Any], entries: tuple[str, ...], what: str
+) -> tuple[CompiledFunction, ...]:
+    """Compile the C functions ``entries`` of a generated module that calls user functions.
+
+    ``text`` defines every name of ``entries`` as a function of :func:`c_signature`; it may
+    call ``carray``, ``store``, ``np``, the decorator ``jit`` (numba's ``njit`` with
+    ``error_model="numpy"``) and the user functions ``users`` by their global names,
+    which numba compiles into it (so their calls cost what inlined code does). Memoized,
+    and cached on disk by the text and the user functions' fingerprints.
+
+    Raises
+    ------
+    ModelError
+        When numba cannot compile the module (``what`` names it). The caller can find
+        the user function at fault by compiling each on its own (:func:`compile_function`).
+
+    """
+    import numba
+    import numpy as np
+
+    from etobs.compile._store import store
+    from etobs.compile.cache import KEY, cache_dir, install_locator
+
+    parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
+    key = _hash_text(f"{_FORMAT}{text}{' '.join(parts)}{numba.__version__}")
+    with _LOCK:
+        done = _MEMO_MODULES.get(key)
+        if done is not None:
+            return done
+        install_locator()
+        cached = cache_dir() is not None
+        memo: dict[int, Any] = {}
+        namespace: dict[str, Any] = {
+            "__name__": "etobs.compile._generated",
+            "carray": numba.carray,
+            "store": store,
+            "np": np,
+            "jit": numba.njit(error_model="numpy"),
+            KEY: key,
+        }
+        namespace.update({g: _jitted(fn, memo) for g, fn in users.items()})
+        exec(compile(text, f"<etobs {what}>", "exec"), namespace)
+        out = []
+        for entry in entries:
+            try:
+                cf = _load_or_compile(namespace[entry], cached, f"{entry} of the {what}")
+            except Exception as exc:  # numba raises many types; all mean "cannot compile"
+                raise ModelError(f"the {what} cannot be compiled: {_reason(exc)}") from exc
+            out.append(CompiledFunction(entry, int(cf.address), cf))
+        _MEMO_MODULES[key] = tuple(out)
+        return _MEMO_MODULES[key]
+
+
+def _load_or_compile(wrapper: Any, cached: bool, name: str) -> Any:
+    """``wrapper`` as a C function, from the disk cache when it is there."""
+    try:
+        return _cfunc(wrapper, cached)
+    except Exception as exc:
+        if not cached:
+            raise
+        # a cache entry that cannot be loaded (written by another version, say)
+        # must not stop the user: compile in memory and say so
+        cf = _cfunc(wrapper, False)
+        warnings.warn(
+            f"etobs: could not load the cached code of {name} ({_reason(exc)}); compiled it "
+            "again. Deleting the cache folder (see etobs.compile.cache) is always safe",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return cf
 
 
 def _cfunc(wrapper: Any, cached: bool) -> Any:

@@ -189,10 +189,10 @@ class EstimationProblem:
         flat = z.reshape(-1, z.shape[-1])
         return self.calls().psi(flat).reshape(*z.shape[:-1], self.plant.n_x)
 
-    def ytilde(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46)) of a batch."""
+    def ytilde(self, t: np.ndarray, x: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46)) of a batch (``compiled`` as in :meth:`calls`)."""
         m: Signal = self.m
-        return self.calls().h(x) + m(t)
+        return self.calls(compiled).h(x) + m(t)
 
     def initial_state(
         self, x0: np.ndarray, z0: np.ndarray, e0: np.ndarray, t0: float, run_ids: np.ndarray | None = None
@@ -213,9 +213,11 @@ class EstimationProblem:
         q = np.zeros((b, lay.n))
         q[:, lay.x] = x0
         q[:, lay.z] = z0
-        ybar = self.ytilde(tt, x0) + e0
+        # the Python functions: one call per run, and compiling them on their own here
+        # would cost a new model more than a second (the engine compiles its own model)
+        ybar = self.ytilde(tt, x0, compiled=False) + e0
         if self.hold == "innovation":
-            ybar = ybar - self.calls().h(self.psi(z0))
+            ybar = ybar - self.calls(False).h(self.psi(z0))
         q[:, lay.ybar] = ybar
         u0 = self.u(tt)
         for ch in lay.channels:

@@ -17,11 +17,15 @@ The system's flow, guard and jump are C functions called by address (see
 :mod:`etobs.compile.ccall`); the kernel's ``args`` are ``(addresses, ia, cf)``: the
 three addresses, and integer and float data shared by all runs that the functions
 receive as ``ia`` and ``a1``. Each call gets the run's parameter vector ``p`` (a row
-of ``P``) and, as ``a2``, the run's scratch array of ``n_work`` floats. So the kernel
+of ``P``) and, as ``a2``, the run's scratch array of ``n_work`` floats. Inside a run
+these travel as plain addresses (:func:`run_args`), and rows of the stage and sample
+arrays as addresses too: an array taken from a tuple, or a view of a row, costs two
+atomic reference-count updates, which were 40 % of a run's time. So the kernel
 does not depend on the system: it is compiled once per machine and method, and cached.
 
-``flow``: ``out = x'`` at ``(t, x = a0)``; ``guard``: ``out = g`` (rule ``k`` jumps where
-``g_k >= 0``); ``jump``: ``out = x+`` of rule ``k``. A call that does not return
+``flow`` (called with ``k = -1``): ``out = x'`` at ``(t, x = a0)``; ``guard`` (``k =
+-2``): ``out = g`` (rule ``r`` jumps where ``g_r >= 0``); ``jump``: ``out = x+`` of rule
+``k >= 0``. The three addresses may be one function that branches on ``k``. A call that does not return
 ``OK`` (1) stops the run with status ``model_error``, and the run's ``error_code`` says
 which function failed and how (``16 * slot + failure``, slots 1, 2, 3 for flow, guard,
 jump unless the function reports its own code >= 16).
@@ -35,7 +39,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from etobs.compile.ccall import ccall
+from etobs.compile.ccall import address, ccall, load_i64, store_i64
 from etobs.hybrid import _jitcache
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
@@ -57,34 +61,54 @@ F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
 I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK = 0, 1, 2, 3, 4
 #: Slots of the system's functions in failure codes.
 FLOW, GUARD, JUMP = 1, 2, 3
+#: The ``k`` that flow and guard are called with (a jump gets its rule, >= 0), so that
+#: one C function may serve as all three (the estimation model does: one compile).
+K_FLOW, K_GUARD = -1, -2
 
 
 @numba.njit(inline="always")
 def _system(slot, k, t, x, p, args, out):
     """Call the system's function ``slot`` (FLOW, GUARD, JUMP) by address into ``out``.
 
-    ``args = ((addresses, ia, cf), work, failure)``. On failure, record the run's first
-    failure (``16 * slot + st`` unless ``st`` is already a code) and poison ``out``.
+    ``args`` is the run's tuple of addresses (:func:`run_args`); ``x``, ``p`` and ``out``
+    are arrays or addresses. On failure, record the run's first failure (``16 * slot +
+    st`` unless ``st`` is already a code); the kernel stops the run at the end of the
+    step.
     """
-    a = args[0]
-    st = ccall(a[0][slot - 1], k, t, x, a[2], args[1], a[2], a[1], p, out)
-    if st != 1:
-        if args[2][0] == 0:
-            args[2][0] = st if st >= 16 else 16 * slot + st
-        for i in range(out.shape[0]):
-            out[i] = np.nan
+    st = ccall(args[slot - 1], k, t, x, args[4], args[5], args[4], args[3], p, out)
+    if st != 1 and load_i64(args[6]) == 0:
+        store_i64(args[6], st if st >= 16 else 16 * slot + st)
+
+
+@numba.njit(inline="always")
+def run_args(shared, work, failure):
+    """The run's addresses: flow, guard, jump, ``ia``, ``cf``, its scratch and its failure flag.
+
+    Plain integers, so that passing them around costs no reference counting (a tuple
+    of arrays is counted at every access). ``shared = (addresses, ia, cf)``; ``work``
+    and ``failure`` are the run's arrays, which the caller keeps alive.
+    """
+    a = shared[0]
+    failure[0] = 0
+    return (a[0], a[1], a[2], address(shared[1]), address(shared[2]), address(work), address(failure))
+
+
+@numba.njit(inline="always")
+def failed(args):
+    """Whether a call of this run failed (its code is then at ``args[6]``)."""
+    return load_i64(args[6]) != 0
 
 
 @numba.njit(inline="always")
 def flow(t, x, p, args, dx):
     """``dx = x'`` by the system's flow function."""
-    _system(FLOW, 0, t, x, p, args, dx)
+    _system(FLOW, K_FLOW, t, x, p, args, dx)
 
 
 @numba.njit(inline="always")
 def guard(t, x, p, args, g):
     """``g`` = every rule's event function."""
-    _system(GUARD, 0, t, x, p, args, g)
+    _system(GUARD, K_GUARD, t, x, p, args, g)
 
 
 @numba.njit(inline="always")

@@ -38,11 +38,15 @@ from etobs.hybrid._kernel import (
     _any_nonneg,
     _dense_eval,
     _peak_probe,
+    address,
+    failed,
     flow,
     flow_call,
     guard,
     guard_call,
     jump_call,
+    load_i64,
+    run_args,
 )
 
 
@@ -78,12 +82,17 @@ def _kernel(
     arc_x,
     error_code,
 ):
+    # the scratch and failure flag of the runs of this thread, one run at a time
+    work = np.zeros(iopt[I_N_WORK])
+    failure = np.zeros(1, dtype=np.int64)
     for r in range(runs.shape[0]):
         run = runs[r]
         _solve_one(
-            args,
+            run_args(args, work, failure),
             X0[run],
-            P[run],
+            # a copy: the run's functions get it at every step, and a view of P would
+            # count references on P's memory, which all threads share
+            P[run].copy(),
             n_rules,
             t0,
             t_end,
@@ -160,9 +169,8 @@ def _solve_one(
     n_grid = grid.shape[0]
 
     buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x)
-    # the system's shared data travels with this run's own workspace and failure flag
-    args = (args, np.zeros(iopt[I_N_WORK]), np.zeros(1, dtype=np.int64))
     K = np.empty((s + 1 + n_extra, n))
+    kp = address(K)  # row i of K is at kp + 8 n i (no views in the step loop)
     Q = np.empty((nq, n))
     x = x_init.copy()
     x_new = np.empty(n)
@@ -229,7 +237,7 @@ def _solve_one(
                 yi = x_new
             for q in range(n):
                 yi[q] = x[q] + hh * dy[q]
-            flow(ti, yi, p, args, K[i])
+            flow(ti, yi, p, args, kp + 8 * n * i)
         # error norm (see Tableau.error_norm)
         _comb(TE, K, s + 1, dy)
         e5 = 0.0
@@ -248,7 +256,7 @@ def _solve_one(
             err = 0.0 if denom == 0.0 else abs(hh) * e5 / np.sqrt(denom * n)
         else:
             err = abs(hh) * np.sqrt(e5 / n)
-        finite = np.isfinite(err) and _all_finite(x_new) and _all_finite(K[s])
+        finite = np.isfinite(err) and _all_finite(x_new) and _row_finite(K, s)
         accept = finite and err <= 1.0
         if err == 0.0:
             factor = MAX_FACTOR
@@ -310,7 +318,7 @@ def _solve_one(
                     st = COMPLETED
         if too_many and st == RUNNING:
             st = MAX_STEPS
-        if args[2][0] != 0:
+        if failed(args):
             st = MODEL_ERROR
 
     status[run] = st
@@ -321,7 +329,7 @@ def _solve_one(
     n_rejected[run] = rejected_n
     log_n[run] = nlog
     arc_n[run] = narc
-    error_code[run] = args[2][0]
+    error_code[run] = load_i64(args[6])
 
 
 @jit
@@ -337,7 +345,7 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
     log_rule, log_t, log_j = buffers[0], buffers[1], buffers[2]
     while m > 0:
         guard_call(t, x, p, args, g)
-        if args[2][0] != 0:
+        if failed(args):
             return MODEL_ERROR, j, nlog, narc
         if not _any_nonneg(g):
             break
@@ -347,7 +355,7 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
             if j >= max_jumps:
                 return MAX_JUMPS, j, nlog, narc
             jump_call(k, t, x, p, args)
-            if args[2][0] != 0:
+            if failed(args):
                 return MODEL_ERROR, j, nlog, narc
             if nlog < log_cap:
                 log_rule[slot, nlog] = k
@@ -360,13 +368,22 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
     flow_call(t, x, p, args, f)
-    if args[2][0] != 0:
+    if failed(args):
         return MODEL_ERROR, j, nlog, narc
     if t >= t_end:
         return COMPLETED, j, nlog, narc
     if not _all_finite(f):
         return NONFINITE, j, nlog, narc
     return RUNNING, j, nlog, narc
+
+
+@jit
+def _row_finite(K, r):
+    """Whether row ``r`` of ``K`` is finite (read in place: a view would be reference counted)."""
+    for i in range(K.shape[1]):
+        if not np.isfinite(K[r, i]):
+            return False
+    return True
 
 
 @jit
@@ -432,7 +449,7 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
         _comb(TDA[r], K, mm, dy)
         for q in range(n):
             y[q] = x[q] + h * dy[q]
-        flow(t + TDC[r] * h, y, p, args, K[mm])
+        flow(t + TDC[r] * h, y, p, args, address(K) + 8 * n * mm)
     for q in range(n):
         d = x_new[q] - x[q]
         Q[0, q] = d
@@ -450,10 +467,11 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
     m = g0.shape[0]
     # samples θ = i/S (i = 1..S-1), then the end θ = 1, then maybe the peak probe
     ns = 0
+    gp = address(gs)  # row i of gs is at gp + 8 m i
     for i in range(1, S):
         th_s[ns] = i / S
         _dense_eval(Q, nq, dop853, x0, th_s[ns], xs)
-        guard(t0 + th_s[ns] * h, xs, p, args, gs[ns])
+        guard(t0 + th_s[ns] * h, xs, p, args, gp + 8 * m * ns)
         ns += 1
     th_s[ns] = 1.0
     for k in range(m):
@@ -472,7 +490,7 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
                     gs[i, k] = gs[i - 1, k]
             th_s[pos] = probe
             _dense_eval(Q, nq, dop853, x0, probe, xs)
-            guard_call(t0 + probe * h, xs, p, args, gs[pos])
+            guard_call(t0 + probe * h, xs, p, args, gp + 8 * m * pos)
             ns += 1
     # first sample with any g >= 0
     first = -1

@@ -1,0 +1,372 @@
+"""The hybrid model (16)--(22) of one problem as Python source, for the engine to compile.
+
+:func:`model_source` writes the flow, guard and jump of one run for a given problem
+*structure*: the sizes, which outputs each node sends, the kinds of its rule, K-functions
+and signals, and the user's functions, which the generated code calls directly (numba
+compiles them into it, so a call costs what an inlined one does). The problem's
+*numbers* (the plant's and observer's ``params``, signal amplitudes, rule parameters) are
+read from the run's parameter vector ``p`` at fixed offsets, so problems that differ only
+in numbers share the compiled model.
+
+Every function of the generated module returns ``1`` (OK) or a failure code ``16 * slot +
+failure`` naming the user function that failed (slots in :data:`FUNCTIONS`; failures as
+in :mod:`etobs.compile.functions`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from etobs.compile.functions import FunctionSpec
+from etobs.model.functions import CONSTANT, CUSTOM, LINEAR, POWER, QUADRATIC
+from etobs.model.rules import DYNAMIC, GENERALIZED, PERIODIC, RELATIVE, STATIC, EngineForm
+from etobs.model.signals import CONSTANT as SIG_CONSTANT
+from etobs.model.signals import FUNCTION as SIG_FUNCTION
+from etobs.model.signals import SINUSOID as SIG_SINUSOID
+from etobs.model.signals import ZERO as SIG_ZERO
+
+#: Names of the failure slots (slot ``s`` is ``FUNCTIONS[s - 1]``). Slots
+#: 1-3 are the kernel's (:mod:`etobs.hybrid._kernel`): a user function that raises makes
+#: the whole model return 0 (numba prints the exception), known only as the model's call.
+FUNCTIONS = (
+    "the estimation model's flow",
+    "the estimation model's guard",
+    "the estimation model's jump",
+    "f_p",
+    "h",
+    "f_o",
+    "psi",
+    "signal u",
+    "signal v",
+    "signal m",
+)
+S_FP, S_H, S_FO, S_PSI, S_SIG = 4, 5, 6, 7, 8
+KSLOTS = ("gamma", "alpha", "gamma_check", "d_prime")
+G, A, GC, D = 0, 1, 2, 3
+#: Offsets of a rule's numbers in its block of ``p``; then two numbers per K-function slot.
+RULE_NUMBERS = ("sigma", "c", "b", "eps", "rho", "period")
+P_SIGMA, P_C, P_B, P_EPS, P_RHO, P_PERIOD = range(len(RULE_NUMBERS))
+P_F = len(RULE_NUMBERS)
+RULE_W = P_F + 2 * len(KSLOTS)
+
+# eq. (14)-(15), (44)-(45) use these class-K functions; k1, k2 are their two numbers
+_KFORMS = {
+    LINEAR: "{k1} * {s}",
+    QUADRATIC: "{k1} * ({s} * {s})",
+    POWER: "{k1} * {s} ** {k2}",
+    CONSTANT: "{k1}",
+}
+
+
+@dataclass
+class ModelSource:
+    """The generated module: its text, the user functions it calls, and the numbers ``p``.
+
+    Attributes
+    ----------
+    text : str
+        Python source defining ``flow(t, q, p, work, dq)``, ``guard(t, q, p, work, g)`` and
+        ``jump(k, t, q, p, work)``, each returning a status (module docstring).
+    users : dict
+        The user functions by the global name the text calls them with.
+    names : dict
+        How messages name each of them (``"f_p"``, ``"gamma of node 0"``, ...).
+    specs : dict
+        How each of them is called (:class:`~etobs.compile.functions.FunctionSpec`).
+    numbers : list of ndarray
+        The blocks of the parameter vector, in order.
+    n_work : int
+        Length of the run's scratch array.
+
+    """
+
+    text: str = ""
+    users: dict[str, Callable[..., Any]] = field(default_factory=dict)
+    names: dict[str, str] = field(default_factory=dict)
+    specs: dict[str, FunctionSpec] = field(default_factory=dict)
+    numbers: list[np.ndarray] = field(default_factory=list)
+    n_work: int = 0
+    _size: int = 0
+
+    def put(self, values: Any) -> int:
+        """Append a block of numbers to ``p``; its offset."""
+        arr = np.asarray(values, dtype=float).reshape(-1)
+        self.numbers.append(arr)
+        self._size += arr.size
+        return self._size - arr.size
+
+    def user(self, fn: Callable[..., Any], glob: str, name: str, spec: FunctionSpec) -> str:
+        """Register a user function under the global name ``glob``; returns ``glob``.
+
+        ``spec`` says how it is called, to compile it on its own and name it when the
+        model cannot be compiled.
+        """
+        self.users[glob] = fn
+        self.names[glob] = name
+        self.specs[glob] = spec
+        return glob
+
+
+@dataclass(frozen=True)
+class _Node:
+    """What the generated code needs of one node."""
+
+    index: int
+    form: EngineForm
+    outputs: tuple[int, ...]
+    s0: int  # index of its rule state in q
+    p0: int  # offset of its numbers in p
+    kforms: tuple[tuple[int, str | None] | None, ...]  # per slot: (kind, user global or None)
+
+
+def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
+    """The model of ``problem`` (an :class:`EstimationProblem` of the base setting) as source.
+
+    ``forms`` are the nodes' engine forms (:func:`etobs.model.rules.engine_form_of`).
+    """
+    pl, ob, lay = problem.plant, problem.observer, problem.layout
+    src = ModelSource()
+    nx, nz, ny, nu, nv = pl.n_x, ob.n_z, pl.n_y, pl.n_u, pl.n_v
+    tp = src.put(pl.params)
+    to = src.put(ob.params)
+    npp, npo = pl.params.size, ob.params.size
+    src.user(pl.f_p, "F_P", "f_p", FunctionSpec("t, A0, A1, A2", (nx, nu, nv), nx, npp))
+    src.user(pl.h, "H", "h", FunctionSpec("A0", (nx,), ny, npp))
+    src.user(ob.f_o, "F_O", "f_o", FunctionSpec("t, A0, A1, A2, A3", (nz, nu, ny, ny), nz, npo))
+    if ob.psi is not None:
+        src.user(ob.psi, "PSI", "psi", FunctionSpec("A0", (nz,), nx, npo))
+    # scratch: u, v, xhat, yhat, ytilde, m
+    wu, wv, wxh, wyh, wy, wm, src.n_work = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
+    signals = []
+    for w, name in enumerate(("u", "v", "m")):
+        sig = getattr(problem, name)
+        kind, values, fn = sig.engine_form()
+        off = src.put(values)
+        if fn is not None:
+            src.user(fn, f"SIG_{name.upper()}", f"signal {name}", FunctionSpec("t", (), sig.dim))
+        signals.append((kind, off, sig.dim))
+    nodes = []
+    for i, (nd, form) in enumerate(zip(problem.nodes, forms, strict=True)):
+        numbers = np.zeros(RULE_W)
+        for key, val in form.numbers.items():
+            numbers[RULE_NUMBERS.index(key)] = val
+        kforms: list[tuple[int, str | None] | None] = []
+        for slot, fn in enumerate(form.kfunctions):
+            if fn is None:
+                kforms.append(None)
+                continue
+            if isinstance(fn, float | int):
+                kind, k1, k2, user = CONSTANT, float(fn), 0.0, None
+            else:
+                kind, k1, k2, user = fn.engine_form()
+            numbers[P_F + 2 * slot : P_F + 2 * slot + 2] = k1, k2
+            glob = None
+            if user is not None:
+                glob = src.user(user, f"K{i}_{slot}", f"{KSLOTS[slot]} of node {i}", FunctionSpec("t", (), 0))
+            kforms.append((kind, glob))
+        nodes.append(
+            _Node(i, form, tuple(int(k) for k in nd.outputs), lay.rule[i].start, src.put(numbers), tuple(kforms))
+        )
+    pp = f"p[{tp}:{tp + npp}]" if npp else None
+    po = f"p[{to}:{to + npo}]" if npo else None
+    c = _Code()
+    c.line("@jit")
+    c.line("def flow(t, q, p, work, dq):")
+    c.indent()
+    c.lines(_signal(0, signals[0], wu))
+    c.lines(_signal(1, signals[1], wv))
+    c.call(  # eq. (2)
+        "F_P", f"t, q[0:{nx}], work[{wu}:{wu + nu}], work[{wv}:{wv + nv}]", pp, f"dq[0:{nx}]", nx, S_FP
+    )
+    z = f"q[{lay.z.start}:{lay.z.start + nz}]"
+    if ob.psi is not None:
+        c.call("PSI", z, po, f"work[{wxh}:{wxh + nx}]", nx, S_PSI)
+    else:
+        c.line(f"for ii in range({nx}):")
+        c.line(f"    work[{wxh} + ii] = q[{lay.z.start} + ii]")
+    c.call("H", f"work[{wxh}:{wxh + nx}]", pp, f"work[{wyh}:{wyh + ny}]", ny, S_H)
+    ybar = f"q[{lay.ybar.start}:{lay.ybar.start + ny}]"
+    c.call(  # eq. (7)
+        "F_O",
+        f"t, {z}, work[{wu}:{wu + nu}], {ybar}, work[{wyh}:{wyh + ny}]",
+        po,
+        f"dq[{lay.z.start}:{lay.z.start + nz}]",
+        nz,
+        S_FO,
+    )
+    c.line(f"for ii in range({ny}):")
+    c.line(f"    dq[{lay.ybar.start} + ii] = 0.0")
+    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+    for nd in nodes:
+        kind = nd.form.kind
+        if kind in (DYNAMIC, GENERALIZED):
+            # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
+            c.line(f"e = {_norm(nd, lay.ybar.start, wy, False)}")
+            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "av"))
+            if kind == DYNAMIC:
+                c.lines(_kcall(nd, G, "e", "gv"))
+                c.line(f"gv = p[{nd.p0 + P_C}] * gv")
+            else:
+                c.lines(_kcall(nd, GC, "e", "gv"))
+            c.line(f"dq[{nd.s0}] = -av + gv")
+        elif kind == PERIODIC:
+            c.line(f"dq[{nd.s0}] = 1.0")
+    c.line("return 1")
+    c.dedent()
+
+    c.line("")
+    c.line("@jit")
+    c.line("def guard(t, q, p, work, g):")
+    c.indent()
+    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+    for nd in nodes:
+        kind, r, i = nd.form.kind, nd.p0, nd.index
+        if kind == PERIODIC:
+            c.line(f"g[{i}] = q[{nd.s0}] - p[{r + P_PERIOD}]")
+            continue
+        c.line(f"e = {_norm(nd, lay.ybar.start, wy, False)}")
+        if kind == RELATIVE:
+            c.line(f"g[{i}] = e - p[{r + P_RHO}] * {_norm(nd, lay.ybar.start, wy, True)} - p[{r + P_EPS}]")
+            continue
+        c.lines(_kcall(nd, G, "e", "gv"))
+        if kind == STATIC:
+            c.line(f"g[{i}] = gv - p[{r + P_EPS}]")
+        elif kind == DYNAMIC:
+            # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
+            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "av"))
+            c.line(f"g[{i}] = gv - p[{r + P_SIGMA}] * av - p[{r + P_EPS}]")
+        else:
+            # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
+            c.lines(_kcall(nd, D, f"q[{nd.s0}]", "w"))
+            c.lines(_kcall(nd, GC, "e", "gc"))
+            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "ac"))
+            c.line(f"g[{i}] = gv + w * gc - p[{r + P_SIGMA}] * w * ac - p[{r + P_EPS}]")
+    c.line("return 1")
+    c.dedent()
+
+    c.line("")
+    c.line("@jit")
+    c.line("def jump(k, t, q, p, work):")
+    c.indent()
+    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+    for nd in nodes:
+        # node k sends ytilde_k (eq. (22): e_k+ = 0) and resets its own rule state
+        c.line(f"{'if' if nd.index == 0 else 'elif'} k == {nd.index}:")
+        c.indent()
+        for idx in nd.outputs:
+            c.line(f"q[{lay.ybar.start + idx}] = work[{wy + idx}]")
+        if nd.form.kind in (DYNAMIC, GENERALIZED):
+            c.line(f"q[{nd.s0}] = p[{nd.p0 + P_B}] * q[{nd.s0}]  # eta+ = b eta")
+        elif nd.form.kind == PERIODIC:
+            c.line(f"q[{nd.s0}] = 0.0")
+        c.dedent()
+    c.line("return 1")
+    c.dedent()
+    c.line("")
+    # the one C entry point (:func:`etobs.compile.functions.c_signature`): the kernel
+    # calls flow with k = -1, guard with k = -2 and the jump of node k >= 0, and gives
+    # each run a scratch array of n_work + 1 floats
+    c.lines(
+        [
+            "def est(k, t, qp, cfp, wp, a3, iap, pp, outp):",
+            f"    q = carray(qp, ({lay.n},))",
+            f"    p = carray(pp, ({src.put(())},))",
+            f"    work = carray(wp, ({src.n_work + 1},))",
+            "    if k == -1:",
+            f"        return flow(t, q, p, work, carray(outp, ({lay.n},)))",
+            "    if k == -2:",
+            f"        return guard(t, q, p, work, carray(outp, ({len(nodes)},)))",
+            "    return jump(k, t, q, p, work)",
+        ]
+    )
+    src.text = c.text()
+    return src
+
+
+class _Code:
+    """Indented lines of Python text."""
+
+    def __init__(self) -> None:
+        self._lines: list[str] = []
+        self._depth = 0
+
+    def line(self, text: str) -> None:
+        self._lines.append("    " * self._depth + text if text else "")
+
+    def lines(self, texts: list[str]) -> None:
+        for t in texts:
+            self.line(t)
+
+    def indent(self) -> None:
+        self._depth += 1
+
+    def dedent(self) -> None:
+        self._depth -= 1
+
+    def call(self, fn: str, args: str, params: str | None, out: str, n: int, slot: int) -> None:
+        self.lines(_call(fn, args, params, out, n, slot))
+
+    def text(self) -> str:
+        return "\n".join(self._lines) + "\n"
+
+
+def _call(fn: str, args: str, params: str | None, out: str, n: int, slot: int) -> list[str]:
+    """Call a user function and store its result into ``out`` (length ``n``), checking the length."""
+    call = f"{fn}({args}, {params})" if params else f"{fn}({args})"
+    return [
+        f"st = store({call}, {out}, {n})",
+        "if st != 1:",
+        f"    return {16 * slot} + st",
+    ]
+
+
+def _signal(which: int, sig: tuple[int, int, int], w0: int) -> list[str]:
+    """Signal ``which`` (0 u, 1 v, 2 m) at ``t`` into ``work[w0:w0 + dim]``."""
+    kind, off, dim = sig
+    if dim == 0:
+        return []
+    if kind == SIG_ZERO:
+        return [f"for ii in range({dim}):", f"    work[{w0} + ii] = 0.0"]
+    if kind == SIG_CONSTANT:
+        return [f"for ii in range({dim}):", f"    work[{w0} + ii] = p[{off} + ii]"]
+    if kind == SIG_SINUSOID:  # amplitude * sin(omega t + phase) + offset
+        return [
+            f"s = np.sin(p[{off + 2 * dim}] * t + p[{off + 2 * dim + 1}])",
+            f"for ii in range({dim}):",
+            f"    work[{w0} + ii] = s * p[{off} + ii] + p[{off + dim} + ii]",
+        ]
+    if kind == SIG_FUNCTION:
+        glob = f"SIG_{'UVM'[which]}"
+        return _call(glob, "t", None, f"work[{w0}:{w0 + dim}]", dim, S_SIG + which)
+    raise ValueError(f"unknown signal kind {kind}")  # pragma: no cover - the kinds above are all
+
+
+def _ytilde(nx: int, ny: int, pp: str | None, m: tuple[int, int, int], wy: int, wm: int) -> list[str]:
+    """``ytilde = h(x) + m(t)`` (eq. (46)) into ``work[wy:wy + ny]``."""
+    out = _call("H", f"q[0:{nx}]", pp, f"work[{wy}:{wy + ny}]", ny, S_H)
+    out += _signal(2, m, wm)
+    return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
+
+
+def _norm(nd: _Node, yb0: int, wy: int, relative: bool) -> str:
+    """``|e_i| = |ybar_i - ytilde_i|``, or ``|ytilde_i|`` when ``relative``, as an expression."""
+    terms = []
+    for k in nd.outputs:
+        d = f"work[{wy + k}]" if relative else f"(q[{yb0 + k}] - work[{wy + k}])"
+        terms.append(f"{d} * {d}")
+    return f"np.sqrt({' + '.join(terms)})"
+
+
+def _kcall(nd: _Node, slot: int, s: str, out: str) -> list[str]:
+    """``out = K(s)`` for K-function ``slot`` of node ``nd``."""
+    kform = nd.kforms[slot]
+    assert kform is not None, "the rule's kind uses this slot"
+    kind, glob = kform
+    r = nd.p0 + P_F + 2 * slot
+    if kind == CUSTOM:
+        return [f"{out} = float({glob}({s}))"]
+    return [f"{out} = {_KFORMS[kind].format(k1=f'p[{r}]', k2=f'p[{r + 1}]', s=s)}"]
