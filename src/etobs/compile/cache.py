@@ -36,12 +36,30 @@ def cache_dir() -> Path | None:
 
 
 def install_locator() -> None:
-    """Put :class:`ContentLocator` first in numba's list of cache locators (once)."""
+    """Put :class:`ContentLocator` first in numba's list of cache locators (once).
+
+    Also key the entries of functions that carry ``__etobs_key__`` by that key alone:
+    numba adds a hash of the pickled closure values, and a closure over a compiled
+    function (``luenberger``'s model ``f``, say) pickles differently in every process,
+    so such a function would never be found again. Our key already covers the closure
+    values, by content (:mod:`etobs.compile.fingerprint`).
+    """
     from numba.core import caching
 
     locators = caching.CacheImpl._locator_classes
     if not any(getattr(c, "__name__", "") == "ContentLocator" for c in locators):
         locators.insert(0, _locator_class(caching._CacheLocator))
+    index_key = caching.Cache._index_key
+    if not getattr(index_key, "_etobs", False):
+
+        def _index_key(self: Any, sig: Any, codegen: Any) -> Any:
+            key = getattr(self._py_func, "__globals__", {}).get(KEY)
+            if key is None:
+                return index_key(self, sig, codegen)
+            return (sig, codegen.magic_tuple(), ("etobs", key))
+
+        _index_key._etobs = True  # type: ignore[attr-defined]
+        caching.Cache._index_key = _index_key
 
 
 def _locator_class(base: type) -> type:

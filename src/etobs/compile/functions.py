@@ -164,9 +164,9 @@ def compile_module(
     """Compile the C functions ``entries`` of a generated module that calls user functions.
 
     ``text`` defines every name of ``entries`` as a function of :func:`c_signature`; it may
-    call ``carray``, ``store``, ``np``, the decorator ``jit`` (numba's ``njit`` with
-    ``error_model="numpy"``) and the user functions ``users`` by their global names,
-    which numba compiles into it (so their calls cost what inlined code does). Memoized,
+    call ``carray``, ``store``, ``np`` and the user functions ``users`` by their global
+    names. Each user function is compiled on its own and cached under its fingerprint
+    (so editing one recompiles only it and this module); the module links them. Memoized,
     and cached on disk by the text and the user functions' fingerprints.
 
     Raises
@@ -196,10 +196,9 @@ def compile_module(
             "carray": numba.carray,
             "store": store,
             "np": np,
-            "jit": numba.njit(error_model="numpy"),
             KEY: key,
         }
-        namespace.update({g: _jitted(fn, memo) for g, fn in users.items()})
+        namespace.update({g: _jitted(fn, memo, cached) for g, fn in users.items()})
         exec(compile(text, f"<etobs {what}>", "exec"), namespace)
         out = []
         for entry in entries:
@@ -246,9 +245,16 @@ def _hash_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _jitted(fn: Any, memo: dict[int, Any]) -> Any:
-    """``fn`` as a numba function, with the Python functions it calls compiled too."""
+def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
+    """``fn`` as a numba function, with the Python functions it calls compiled too.
+
+    With ``cached``, each is compiled on its own and its machine code kept in the disk
+    cache under its fingerprint (:mod:`etobs.compile.cache`): code that calls it links
+    it, so editing one function recompiles only that function and its callers.
+    """
     import numba
+
+    from etobs.compile.cache import KEY
 
     if hasattr(fn, "py_func"):
         return fn
@@ -258,7 +264,7 @@ def _jitted(fn: Any, memo: dict[int, Any]) -> Any:
         return memo[id(fn)]
 
     def convert(value: Any) -> Any:
-        return _jitted(value, memo) if isinstance(value, types.FunctionType) else value
+        return _jitted(value, memo, cached) if isinstance(value, types.FunctionType) else value
 
     glb = dict(fn.__globals__)
     # numba imports a compiled function's module again when it loads it from the disk
@@ -271,7 +277,9 @@ def _jitted(fn: Any, memo: dict[int, Any]) -> Any:
     cells = tuple(types.CellType(convert(c.cell_contents)) for c in fn.__closure__ or ())
     clone = types.FunctionType(fn.__code__, glb, fn.__name__, fn.__defaults__, cells or None)
     clone.__qualname__ = fn.__qualname__
-    out = numba.njit(error_model="numpy")(clone)
+    if cached:
+        glb[KEY] = f"fn-{fingerprint(fn)}-{_FORMAT}-{numba.__version__}"
+    out = numba.njit(error_model="numpy", cache=cached)(clone)
     memo[id(fn)] = out
     return out
 

@@ -69,8 +69,8 @@ class ModelSource:
     Attributes
     ----------
     text : str
-        Python source defining ``flow(t, q, p, work, dq)``, ``guard(t, q, p, work, g)`` and
-        ``jump(k, t, q, p, work)``, each returning a status (module docstring).
+        Python source defining the C function ``est``: the flow (``k = -1``), the guard
+        (``k = -2``) or the jump of node ``k``, returning a status (module docstring).
     users : dict
         The user functions by the global name the text calls them with.
     names : dict
@@ -142,7 +142,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     # scratch: u, v, xhat, yhat, ytilde, m
     wu, wv, wxh, wyh, wy, wm, src.n_work = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
     signals = []
-    for w, name in enumerate(("u", "v", "m")):
+    for name in ("u", "v", "m"):
         sig = getattr(problem, name)
         kind, values, fn = sig.engine_form()
         off = src.put(values)
@@ -169,14 +169,24 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
                 glob = src.user(user, f"K{i}_{slot}", f"{KSLOTS[slot]} of node {i}", FunctionSpec("t", (), 0))
             kforms.append((kind, glob))
         nodes.append(
-            _Node(i, form, tuple(int(k) for k in nd.outputs), lay.rule[i].start, src.put(numbers), tuple(kforms))
+            _Node(
+                i, form, tuple(int(k) for k in nd.outputs), lay.rule[i].start, src.put(numbers), tuple(kforms)
+            )
         )
     pp = f"p[{tp}:{tp + npp}]" if npp else None
     po = f"p[{to}:{to + npo}]" if npo else None
     c = _Code()
-    c.line("@jit")
-    c.line("def flow(t, q, p, work, dq):")
+    # one C function (:func:`etobs.compile.functions.c_signature`), compiled once: the
+    # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of node
+    # k >= 0, and gives each run a scratch array of n_work + 1 floats
+    c.line("def est(k, t, qp, cfp, wp, a3, iap, pp, outp):")
     c.indent()
+    c.line(f"q = carray(qp, ({lay.n},))")
+    c.line(f"p = carray(pp, ({src.put(())},))")
+    c.line(f"work = carray(wp, ({src.n_work + 1},))")
+    c.line("if k == -1:")
+    c.indent()
+    c.line(f"dq = carray(outp, ({lay.n},))")
     c.lines(_signal(0, signals[0], wu))
     c.lines(_signal(1, signals[1], wv))
     c.call(  # eq. (2)
@@ -218,10 +228,9 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("return 1")
     c.dedent()
 
-    c.line("")
-    c.line("@jit")
-    c.line("def guard(t, q, p, work, g):")
+    c.line("if k == -2:")
     c.indent()
+    c.line(f"g = carray(outp, ({len(nodes)},))")
     c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
     for nd in nodes:
         kind, r, i = nd.form.kind, nd.p0, nd.index
@@ -248,10 +257,6 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("return 1")
     c.dedent()
 
-    c.line("")
-    c.line("@jit")
-    c.line("def jump(k, t, q, p, work):")
-    c.indent()
     c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
     for nd in nodes:
         # node k sends ytilde_k (eq. (22): e_k+ = 0) and resets its own rule state
@@ -266,23 +271,6 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
         c.dedent()
     c.line("return 1")
     c.dedent()
-    c.line("")
-    # the one C entry point (:func:`etobs.compile.functions.c_signature`): the kernel
-    # calls flow with k = -1, guard with k = -2 and the jump of node k >= 0, and gives
-    # each run a scratch array of n_work + 1 floats
-    c.lines(
-        [
-            "def est(k, t, qp, cfp, wp, a3, iap, pp, outp):",
-            f"    q = carray(qp, ({lay.n},))",
-            f"    p = carray(pp, ({src.put(())},))",
-            f"    work = carray(wp, ({src.n_work + 1},))",
-            "    if k == -1:",
-            f"        return flow(t, q, p, work, carray(outp, ({lay.n},)))",
-            "    if k == -2:",
-            f"        return guard(t, q, p, work, carray(outp, ({len(nodes)},)))",
-            "    return jump(k, t, q, p, work)",
-        ]
-    )
     src.text = c.text()
     return src
 

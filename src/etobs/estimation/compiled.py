@@ -19,7 +19,6 @@ hold or a network, until they move to the engine; or a rule of the user's own).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 

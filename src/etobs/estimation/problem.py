@@ -190,7 +190,7 @@ class EstimationProblem:
         return self.calls().psi(flat).reshape(*z.shape[:-1], self.plant.n_x)
 
     def ytilde(self, t: np.ndarray, x: np.ndarray, compiled: bool | None = None) -> np.ndarray:
-        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46)) of a batch (``compiled`` as in :meth:`calls`)."""
+        """Measured output ``ytilde = h(x) + m(t)`` (eq. (46)) of a batch; ``compiled`` as in ``calls``."""
         m: Signal = self.m
         return self.calls(compiled).h(x) + m(t)
 
