@@ -275,3 +275,52 @@ def test_compiled_functions_are_cached_on_disk_for_the_next_process(tmp_path, mo
     third = _run(_FUNCTION_SCRIPT.format(k=3.0, folder=str(folder)))
     assert third["hits"] == 0 and len(third["nbc"]) > len(first["nbc"])
     assert third["out"] != first["out"]
+
+
+_MODEL_SCRIPT = """
+    import json, numpy as np
+    from pathlib import Path
+    from etobs import EstimationProblem, Node, Plant, Quadratic, Linear, DynamicRule, simulate
+    from etobs.model import luenberger, send_on_delta
+
+    A = np.array([[0.0, 1.0], [-2.0, -{damping}]])
+    plant = Plant(f_p=lambda t, x, u, v: A @ x, h=lambda x: x[:1].copy(), n_x=2, n_y=1)
+    B = np.array([[0.0, 1.0], [-2.0, -0.5]])
+    observer = luenberger(lambda t, x, u: B @ x, L=[[1.0], [0.5]])  # a closure over a compiled f
+    rule = {rule}
+    res = simulate(EstimationProblem(plant, observer, nodes=[Node((0,), rule)]), [1.0, 0.0], 2.0)
+    folder = Path({folder!r})
+    print(json.dumps({{"n": len(res.transmissions), "backend": res.backend,
+                      "files": sorted(p.name for p in folder.glob("*.nb*"))}}))
+    """
+
+
+def test_a_new_model_reuses_the_cached_functions_it_shares_with_an_earlier_one(tmp_path, monkeypatch):
+    """A new structure compiles its model; an edited function is compiled again; the rest load.
+
+    luenberger's ``f_o`` closes over a compiled function, which numba's own cache key (a
+    pickle of the closure values) would make new in every process.
+    """
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path))
+    folder = tmp_path / "functions"
+    dynamic = "DynamicRule(gamma=Quadratic(5.0), alpha=Linear(1.0), sigma=0.5, c=0.1, eps=1e-3, eta0=0.1)"
+
+    def run(rule: str, damping: float = 0.5) -> dict:
+        out = _run(_MODEL_SCRIPT.format(rule=rule, damping=damping, folder=str(folder)))
+        assert out["backend"] == "engine" and out["n"] > 0
+        return out
+
+    def named(files: list[str], part: str) -> list[str]:
+        return [f for f in files if part in f]
+
+    first = run("send_on_delta(0.05)")
+    assert len(named(first["files"], "f_o-")) == 2  # one machine-code file and its index
+    again = run("send_on_delta(0.05)")
+    assert again["files"] == first["files"]  # nothing compiled
+    other = run(dynamic)  # another structure: a new model, the same user functions
+    new = set(other["files"]) - set(first["files"])
+    assert new and all("estimation model" in f for f in new)
+    edited = run(dynamic, damping=0.7)  # the plant's closed-over matrix changed
+    new = set(edited["files"]) - set(other["files"])
+    assert any("estimation model" in f for f in new) and any("lambda" in f for f in new)
+    assert named(edited["files"], "f_o-") == named(first["files"], "f_o-")  # f_o loaded, never again
