@@ -3,7 +3,9 @@
 Run: ``python benchmarks/bench_user_model.py [--quick]``. The model (benchmarks/user_model.py)
 has a ``Custom`` K-function, a time-varying ``FunctionSignal`` input and a vector node.
 Prints per-run times of backend="engine" (the default) and backend="scipy" on the same
-runs and their ratio, the largest gap between their transmission times, and the compile
+runs and their ratio, the largest gap between their transmission times (at the default
+tolerances and at tighter ones, with the engine's own gap to its tighter runs as the
+yardstick of integration error), and the compile
 times measured in fresh processes sharing a fresh cache folder:
 cold (a new model), cached (a new process), after editing one function, after changing
 only numbers (params), and with the factory named by file path.
@@ -27,7 +29,7 @@ sys.path.insert(0, str(HERE))
 
 
 def per_run(quick: bool) -> None:
-    from etobs import simulate
+    from etobs import SolverOptions, simulate
     from user_model import problem
 
     pb = problem()
@@ -42,15 +44,7 @@ def per_run(quick: bool) -> None:
     t = time.perf_counter()
     ref = simulate(pb, X[:n_scipy], t_end, backend="scipy")
     t_ref = (time.perf_counter() - t) / n_scipy
-    gap = 0.0
-    same = True
-    for r in range(n_scipy):
-        for node in range(pb.n_nodes):
-            a = eng.transmissions.times(r, node)
-            b = ref.transmissions.times(r, node)
-            same &= a.shape == b.shape
-            if a.shape == b.shape and a.size:
-                gap = max(gap, float(np.max(np.abs(a - b))))
+    same, gap = agreement(eng, ref, n_scipy, pb.n_nodes)
     print(
         f"user model, {t_end:g} s horizon: engine {t_eng * 1e3:.2f} ms/run ({n_engine} runs, "
         f"{eng.backend}), scipy {t_ref * 1e3:.1f} ms/run ({n_scipy} runs)"
@@ -59,6 +53,30 @@ def per_run(quick: bool) -> None:
         f"  ratio scipy/engine: {t_ref / t_eng:.0f}x; same transmission counts: {same}; "
         f"largest event-time gap: {gap:.2e} s"
     )
+    # The gap is integration error: the engine against itself at a tighter tolerance is as
+    # far, and both backends close in on each other as the tolerance shrinks.
+    for tol in (1e-12, 1e-13):
+        opts = SolverOptions(rtol=tol, atol=tol)
+        e_t = simulate(pb, X[:n_scipy], t_end, options=opts)
+        r_t = simulate(pb, X[:n_scipy], t_end, options=opts, backend="scipy")
+        same_t, gap_t = agreement(e_t, r_t, n_scipy, pb.n_nodes)
+        _, self_gap = agreement(eng, e_t, n_scipy, pb.n_nodes)
+        print(
+            f"  rtol = atol = {tol:g}: engine vs scipy {gap_t:.2e} s (same counts: {same_t}); "
+            f"engine at the default against itself at {tol:g}: {self_gap:.2e} s"
+        )
+
+
+def agreement(a, b, runs: int, nodes: int) -> tuple[bool, float]:
+    """Whether the first ``runs`` runs send the same transmissions, and the largest time gap."""
+    gap, same = 0.0, True
+    for r in range(runs):
+        for node in range(nodes):
+            ta, tb = a.transmissions.times(r, node), b.transmissions.times(r, node)
+            same &= ta.shape == tb.shape
+            if ta.shape == tb.shape and ta.size:
+                gap = max(gap, float(np.max(np.abs(ta - tb))))
+    return same, gap
 
 
 SCRIPT = textwrap.dedent(
