@@ -92,6 +92,11 @@ class ModelSource:
     n_work: int = 0
     _size: int = 0
 
+    @property
+    def size(self) -> int:
+        """Length of ``p`` so far."""
+        return self._size
+
     def put(self, values: Any) -> int:
         """Append a block of numbers to ``p``; its offset."""
         arr = np.asarray(values, dtype=float).reshape(-1)
@@ -123,6 +128,24 @@ class _Node:
     kforms: tuple[tuple[int, str | None] | None, ...]  # per slot: (kind, user global or None)
 
 
+@dataclass(frozen=True)
+class _Where:
+    """Where the generated code finds things: sizes, offsets in ``q``, ``work`` and ``p``."""
+
+    nx: int
+    nz: int
+    ny: int
+    nu: int
+    nv: int
+    z0: int  # q[z0:z0 + nz] is z
+    yb0: int  # q[yb0:yb0 + ny] is ybar
+    w: dict[str, int]  # offsets in work of u, v, xhat, yhat, ytilde, m
+    pp: str | None  # the plant's params as an expression, or None
+    po: str | None  # the observer's params
+    psi: bool
+    signals: tuple[tuple[int, int, int], ...]  # (kind, offset in p, dim) of u, v, m
+
+
 def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     """The model of ``problem`` (an :class:`EstimationProblem` of the base setting) as source.
 
@@ -140,7 +163,8 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     if ob.psi is not None:
         src.user(ob.psi, "PSI", "psi", FunctionSpec("A0", (nz,), nx, npo))
     # scratch: u, v, xhat, yhat, ytilde, m
-    wu, wv, wxh, wyh, wy, wm, src.n_work = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
+    offsets = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
+    src.n_work = offsets[-1]
     signals = []
     for name in ("u", "v", "m"):
         sig = getattr(problem, name)
@@ -149,32 +173,24 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
         if fn is not None:
             src.user(fn, f"SIG_{name.upper()}", f"signal {name}", FunctionSpec("t", (), sig.dim))
         signals.append((kind, off, sig.dim))
-    nodes = []
-    for i, (nd, form) in enumerate(zip(problem.nodes, forms, strict=True)):
-        numbers = np.zeros(RULE_W)
-        for key, val in form.numbers.items():
-            numbers[RULE_NUMBERS.index(key)] = val
-        kforms: list[tuple[int, str | None] | None] = []
-        for slot, fn in enumerate(form.kfunctions):
-            if fn is None:
-                kforms.append(None)
-                continue
-            if isinstance(fn, float | int):
-                kind, k1, k2, user = CONSTANT, float(fn), 0.0, None
-            else:
-                kind, k1, k2, user = fn.engine_form()
-            numbers[P_F + 2 * slot : P_F + 2 * slot + 2] = k1, k2
-            glob = None
-            if user is not None:
-                glob = src.user(user, f"K{i}_{slot}", f"{KSLOTS[slot]} of node {i}", FunctionSpec("t", (), 0))
-            kforms.append((kind, glob))
-        nodes.append(
-            _Node(
-                i, form, tuple(int(k) for k in nd.outputs), lay.rule[i].start, src.put(numbers), tuple(kforms)
-            )
-        )
-    pp = f"p[{tp}:{tp + npp}]" if npp else None
-    po = f"p[{to}:{to + npo}]" if npo else None
+    nodes = [
+        _node(src, i, nd, form, lay.rule[i].start)
+        for i, (nd, form) in enumerate(zip(problem.nodes, forms, strict=True))
+    ]
+    at = _Where(
+        nx,
+        nz,
+        ny,
+        nu,
+        nv,
+        lay.z.start,
+        lay.ybar.start,
+        dict(zip(("u", "v", "xhat", "yhat", "ytilde", "m"), offsets[:-1], strict=True)),
+        f"p[{tp}:{tp + npp}]" if npp else None,
+        f"p[{to}:{to + npo}]" if npo else None,
+        ob.psi is not None,
+        tuple(signals),
+    )
     c = _Code()
     # one C function (:func:`etobs.compile.functions.c_signature`), compiled once: the
     # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of node
@@ -182,40 +198,74 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("def est(k, t, qp, cfp, wp, a3, iap, pp, outp):")
     c.indent()
     c.line(f"q = carray(qp, ({lay.n},))")
-    c.line(f"p = carray(pp, ({src.put(())},))")
+    c.line(f"p = carray(pp, ({src.size},))")
     c.line(f"work = carray(wp, ({src.n_work + 1},))")
     c.line("if k == -1:")
     c.indent()
     c.line(f"dq = carray(outp, ({lay.n},))")
-    c.lines(_signal(0, signals[0], wu))
-    c.lines(_signal(1, signals[1], wv))
-    c.call(  # eq. (2)
-        "F_P", f"t, q[0:{nx}], work[{wu}:{wu + nu}], work[{wv}:{wv + nv}]", pp, f"dq[0:{nx}]", nx, S_FP
-    )
-    z = f"q[{lay.z.start}:{lay.z.start + nz}]"
-    if ob.psi is not None:
-        c.call("PSI", z, po, f"work[{wxh}:{wxh + nx}]", nx, S_PSI)
+    _flow(c, at, nodes)
+    c.line("return 1")
+    c.dedent()
+    c.line("if k == -2:")
+    c.indent()
+    c.line(f"g = carray(outp, ({len(nodes)},))")
+    _guard(c, at, nodes)
+    c.line("return 1")
+    c.dedent()
+    _jump(c, at, nodes)
+    c.line("return 1")
+    c.dedent()
+    src.text = c.text()
+    return src
+
+
+def _node(src: ModelSource, i: int, nd: Any, form: EngineForm, s0: int) -> _Node:
+    """Node ``i``'s numbers into ``p`` and its user K-functions into ``src``."""
+    numbers = np.zeros(RULE_W)
+    for key, val in form.numbers.items():
+        numbers[RULE_NUMBERS.index(key)] = val
+    kforms: list[tuple[int, str | None] | None] = []
+    for slot, fn in enumerate(form.kfunctions):
+        if fn is None:
+            kforms.append(None)
+            continue
+        if isinstance(fn, float | int):
+            kind, k1, k2, user = CONSTANT, float(fn), 0.0, None
+        else:
+            kind, k1, k2, user = fn.engine_form()
+        numbers[P_F + 2 * slot : P_F + 2 * slot + 2] = k1, k2
+        glob = None
+        if user is not None:
+            glob = src.user(user, f"K{i}_{slot}", f"{KSLOTS[slot]} of node {i}", FunctionSpec("t", (), 0))
+        kforms.append((kind, glob))
+    return _Node(i, form, tuple(int(k) for k in nd.outputs), s0, src.put(numbers), tuple(kforms))
+
+
+def _flow(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+    """``dq = q'`` (eq. (2), (7), (14), (44))."""
+    w, nx, nz, ny, nu, nv = at.w, at.nx, at.nz, at.ny, at.nu, at.nv
+    c.lines(_signal(0, at.signals[0], w["u"]))
+    c.lines(_signal(1, at.signals[1], w["v"]))
+    u = f"work[{w['u']}:{w['u'] + nu}]"
+    c.call("F_P", f"t, q[0:{nx}], {u}, work[{w['v']}:{w['v'] + nv}]", at.pp, f"dq[0:{nx}]", nx, S_FP)  # (2)
+    z = f"q[{at.z0}:{at.z0 + nz}]"
+    xhat, yhat = f"work[{w['xhat']}:{w['xhat'] + nx}]", f"work[{w['yhat']}:{w['yhat'] + ny}]"
+    if at.psi:
+        c.call("PSI", z, at.po, xhat, nx, S_PSI)
     else:
         c.line(f"for ii in range({nx}):")
-        c.line(f"    work[{wxh} + ii] = q[{lay.z.start} + ii]")
-    c.call("H", f"work[{wxh}:{wxh + nx}]", pp, f"work[{wyh}:{wyh + ny}]", ny, S_H)
-    ybar = f"q[{lay.ybar.start}:{lay.ybar.start + ny}]"
-    c.call(  # eq. (7)
-        "F_O",
-        f"t, {z}, work[{wu}:{wu + nu}], {ybar}, work[{wyh}:{wyh + ny}]",
-        po,
-        f"dq[{lay.z.start}:{lay.z.start + nz}]",
-        nz,
-        S_FO,
-    )
+        c.line(f"    work[{w['xhat']} + ii] = q[{at.z0} + ii]")
+    c.call("H", xhat, at.pp, yhat, ny, S_H)
+    ybar = f"q[{at.yb0}:{at.yb0 + ny}]"
+    c.call("F_O", f"t, {z}, {u}, {ybar}, {yhat}", at.po, f"dq[{at.z0}:{at.z0 + nz}]", nz, S_FO)  # eq. (7)
     c.line(f"for ii in range({ny}):")
-    c.line(f"    dq[{lay.ybar.start} + ii] = 0.0")
-    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+    c.line(f"    dq[{at.yb0} + ii] = 0.0")
+    c.lines(_ytilde(at))
     for nd in nodes:
         kind = nd.form.kind
         if kind in (DYNAMIC, GENERALIZED):
             # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
-            c.line(f"e = {_norm(nd, lay.ybar.start, wy, False)}")
+            c.line(f"e = {_norm(nd, at, False)}")
             c.lines(_kcall(nd, A, f"q[{nd.s0}]", "av"))
             if kind == DYNAMIC:
                 c.lines(_kcall(nd, G, "e", "gv"))
@@ -225,21 +275,19 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
             c.line(f"dq[{nd.s0}] = -av + gv")
         elif kind == PERIODIC:
             c.line(f"dq[{nd.s0}] = 1.0")
-    c.line("return 1")
-    c.dedent()
 
-    c.line("if k == -2:")
-    c.indent()
-    c.line(f"g = carray(outp, ({len(nodes)},))")
-    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+
+def _guard(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+    """Every node's trigger function (eq. (15), (45)): the node sends when ``g_i >= 0``."""
+    c.lines(_ytilde(at))
     for nd in nodes:
         kind, r, i = nd.form.kind, nd.p0, nd.index
         if kind == PERIODIC:
             c.line(f"g[{i}] = q[{nd.s0}] - p[{r + P_PERIOD}]")
             continue
-        c.line(f"e = {_norm(nd, lay.ybar.start, wy, False)}")
+        c.line(f"e = {_norm(nd, at, False)}")
         if kind == RELATIVE:
-            c.line(f"g[{i}] = e - p[{r + P_RHO}] * {_norm(nd, lay.ybar.start, wy, True)} - p[{r + P_EPS}]")
+            c.line(f"g[{i}] = e - p[{r + P_RHO}] * {_norm(nd, at, True)} - p[{r + P_EPS}]")
             continue
         c.lines(_kcall(nd, G, "e", "gv"))
         if kind == STATIC:
@@ -254,25 +302,21 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
             c.lines(_kcall(nd, GC, "e", "gc"))
             c.lines(_kcall(nd, A, f"q[{nd.s0}]", "ac"))
             c.line(f"g[{i}] = gv + w * gc - p[{r + P_SIGMA}] * w * ac - p[{r + P_EPS}]")
-    c.line("return 1")
-    c.dedent()
 
-    c.lines(_ytilde(nx, ny, pp, signals[2], wy, wm))
+
+def _jump(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+    """Node ``k`` sends ``ytilde_k`` (eq. (22): ``e_k+ = 0``) and resets its own rule state."""
+    c.lines(_ytilde(at))
     for nd in nodes:
-        # node k sends ytilde_k (eq. (22): e_k+ = 0) and resets its own rule state
         c.line(f"{'if' if nd.index == 0 else 'elif'} k == {nd.index}:")
         c.indent()
         for idx in nd.outputs:
-            c.line(f"q[{lay.ybar.start + idx}] = work[{wy + idx}]")
+            c.line(f"q[{at.yb0 + idx}] = work[{at.w['ytilde'] + idx}]")
         if nd.form.kind in (DYNAMIC, GENERALIZED):
             c.line(f"q[{nd.s0}] = p[{nd.p0 + P_B}] * q[{nd.s0}]  # eta+ = b eta")
         elif nd.form.kind == PERIODIC:
             c.line(f"q[{nd.s0}] = 0.0")
         c.dedent()
-    c.line("return 1")
-    c.dedent()
-    src.text = c.text()
-    return src
 
 
 class _Code:
@@ -333,18 +377,20 @@ def _signal(which: int, sig: tuple[int, int, int], w0: int) -> list[str]:
     raise ValueError(f"unknown signal kind {kind}")  # pragma: no cover - the kinds above are all
 
 
-def _ytilde(nx: int, ny: int, pp: str | None, m: tuple[int, int, int], wy: int, wm: int) -> list[str]:
-    """``ytilde = h(x) + m(t)`` (eq. (46)) into ``work[wy:wy + ny]``."""
-    out = _call("H", f"q[0:{nx}]", pp, f"work[{wy}:{wy + ny}]", ny, S_H)
-    out += _signal(2, m, wm)
+def _ytilde(at: _Where) -> list[str]:
+    """``ytilde = h(x) + m(t)`` (eq. (46)) into the scratch."""
+    wy, wm, ny = at.w["ytilde"], at.w["m"], at.ny
+    out = _call("H", f"q[0:{at.nx}]", at.pp, f"work[{wy}:{wy + ny}]", ny, S_H)
+    out += _signal(2, at.signals[2], wm)
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
 
 
-def _norm(nd: _Node, yb0: int, wy: int, relative: bool) -> str:
+def _norm(nd: _Node, at: _Where, relative: bool) -> str:
     """``|e_i| = |ybar_i - ytilde_i|``, or ``|ytilde_i|`` when ``relative``, as an expression."""
+    wy = at.w["ytilde"]
     terms = []
     for k in nd.outputs:
-        d = f"work[{wy + k}]" if relative else f"(q[{yb0 + k}] - work[{wy + k}])"
+        d = f"work[{wy + k}]" if relative else f"(q[{at.yb0 + k}] - work[{wy + k}])"
         terms.append(f"{d} * {d}")
     return f"np.sqrt({' + '.join(terms)})"
 
