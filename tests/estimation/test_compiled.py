@@ -246,19 +246,24 @@ def test_a_function_numba_cannot_compile_is_named_and_scipy_runs_it():
     assert res.ok and len(res.transmissions) > 0
 
 
+def _fails_past(f_p):
+    """Two runs of ``x' = 1`` whose plant ``f_p`` fails once ``x > 1.5``: from 1 (at t = 0.5) and -5."""
+    plant = Plant(f_p=f_p, h=lambda x: x.copy(), n_x=1, n_y=1)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(1), n_z=1)
+    pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
+    res = simulate(pb, [[1.0], [-5.0]], 1.0, backend="engine")
+    assert res.status_labels() == ["model_error", "completed"]
+    assert res.solution.t_final[0] <= 0.5 + 1e-9  # x = 1 + t reaches 1.5 at t = 0.5
+    return res
+
+
 def test_wrong_shape_during_a_run_is_a_model_error_naming_the_function():
     def f_p(t, x, u, v):
         if x[0] > 1.5:
             return np.zeros(2)
         return np.ones(1)
 
-    plant = Plant(f_p=f_p, h=lambda x: x.copy(), n_x=1, n_y=1)
-    observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(1), n_z=1)
-    pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
-    res = simulate(pb, [[1.0], [-5.0]], 1.0, backend="engine")
-    assert res.status_labels() == ["model_error", "completed"]
-    assert "`f_p` returned the wrong shape" in res.messages()[0]
-    assert res.solution.t_final[0] <= 0.5 + 1e-9  # x = 1 + t reaches 1.5 at t = 0.5
+    assert "`f_p` returned the wrong shape" in _fails_past(f_p).messages()[0]
 
 
 # numba's C function reports the exception as "unraisable" (printed with its traceback)
@@ -269,15 +274,10 @@ def test_a_function_that_raises_during_a_run_is_a_model_error_of_the_estimation_
             raise ValueError("x too large")
         return np.ones(1)
 
-    plant = Plant(f_p=f_p, h=lambda x: x.copy(), n_x=1, n_y=1)
-    observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(1), n_z=1)
-    pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
-    res = simulate(pb, [[1.0], [-5.0]], 1.0, backend="engine")
-    assert res.status_labels() == ["model_error", "completed"]
     # the user functions are compiled into the model: numba prints the exception, and the
     # message names the model's call, not a function that may not be the one that raised
-    assert "`the estimation model's flow` raised an exception" in res.messages()[0]
-    assert res.solution.t_final[0] <= 0.5 + 1e-9
+    message = _fails_past(f_p).messages()[0]
+    assert "`the estimation model's flow` raised an exception" in message
 
 
 # ---- choosing the backend ------------------------------------------------------------------

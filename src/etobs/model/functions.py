@@ -18,7 +18,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError
 
-#: Kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+#: Kind codes of the engine form (see :mod:`etobs.estimation._model_source`).
 LINEAR, QUADRATIC, POWER, CUSTOM, CONSTANT = 0, 1, 2, 3, 4
 
 

@@ -28,7 +28,7 @@ from etobs import _validate as v
 from etobs.errors import InputError
 from etobs.model.functions import KFunction, Linear, as_kfunction
 
-#: Rule kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+#: Rule kind codes of the engine form (see :mod:`etobs.estimation._model_source`).
 DYNAMIC, STATIC, PERIODIC, RELATIVE, GENERALIZED = 0, 1, 2, 3, 4
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import ModelError
 
-#: Kind codes of the engine form (see :mod:`etobs.estimation._engine_model`).
+#: Kind codes of the engine form (see :mod:`etobs.estimation._model_source`).
 ZERO, CONSTANT, SINUSOID, FUNCTION = 0, 1, 2, 3
 
 
