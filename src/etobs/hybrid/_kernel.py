@@ -38,6 +38,9 @@ from typing import Any
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.core.extending import intrinsic
 
 from etobs.compile.ccall import address, ccall, load_i64, store_i64
 from etobs.hybrid import _jitcache
@@ -91,6 +94,34 @@ def run_args(shared, work, failure):
     a = shared[0]
     failure[0] = 0
     return (a[0], a[1], a[2], address(shared[1]), address(shared[2]), address(work), address(failure))
+
+
+@intrinsic
+def _f8ptr(typingctx, addr):  # type: ignore[no-untyped-def]
+    """``addr`` (an integer) as a pointer to float64."""
+    sig = types.CPointer(types.float64)(addr)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        return builder.inttoptr(args[0], ir.DoubleType().as_pointer())
+
+    return sig, codegen
+
+
+@numba.njit(inline="always")
+def rows_at(base, offset, rows, cols):
+    """A ``(rows, cols)`` array at ``base + 8 offset`` (an address into the thread's scratch).
+
+    It owns no memory, so numba counts no references on it: the step loop's arrays are
+    all of this kind (a counted array costs two atomic operations at every call that
+    takes it).
+    """
+    return numba.carray(_f8ptr(base + 8 * offset), (rows, cols))
+
+
+@numba.njit(inline="always")
+def vector_at(base, offset, size):
+    """A 1-D array of ``size`` at ``base + 8 offset`` (see :func:`rows_at`)."""
+    return numba.carray(_f8ptr(base + 8 * offset), (size,))
 
 
 @numba.njit(inline="always")

@@ -40,6 +40,8 @@ from etobs.hybrid._kernel import (
     _peak_probe,
     address,
     failed,
+    rows_at,
+    vector_at,
     flow,
     flow_call,
     guard,
@@ -82,17 +84,18 @@ def _kernel(
     arc_x,
     error_code,
 ):
-    # the scratch and failure flag of the runs of this thread, one run at a time
+    # the scratch and failure flag of the runs of this thread, one run at a time; the
+    # solver's own arrays live in one buffer (see _solve_one)
     work = np.zeros(iopt[I_N_WORK])
     failure = np.zeros(1, dtype=np.int64)
+    buffer = np.empty(_scratch_size(X0.shape[1], n_rules, iopt[I_SAMPLES], P.shape[1]))
     for r in range(runs.shape[0]):
         run = runs[r]
         _solve_one(
             run_args(args, work, failure),
+            address(buffer),
             X0[run],
-            # a copy: the run's functions get it at every step, and a view of P would
-            # count references on P's memory, which all threads share
-            P[run].copy(),
+            P[run],
             n_rules,
             t0,
             t_end,
@@ -124,10 +127,18 @@ def _kernel(
 
 
 @jit
+def _scratch_size(n, m, S, n_p):
+    """Floats of the solver's arrays for one run (see ``_solve_one``)."""
+    n_s = max(S - 1, 0)
+    return (N_STAGES + 1 + N_EXTRA) * n + NQ * n + 6 * n + 4 * m + (n_s + 2) * (1 + m) + n_p + 1
+
+
+@jit
 def _solve_one(
     args,
+    base,
     x_init,
-    p,
+    p_run,
     m,
     t0,
     t_end,
@@ -169,22 +180,37 @@ def _solve_one(
     n_grid = grid.shape[0]
 
     buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x)
-    K = np.empty((s + 1 + n_extra, n))
-    kp = address(K)  # row i of K is at kp + 8 n i (no views in the step loop)
-    Q = np.empty((nq, n))
-    x = x_init.copy()
-    x_new = np.empty(n)
-    y = np.empty(n)
-    dy = np.empty(n)
-    xs = np.empty(n)
-    f = np.empty(n)
-    g = np.empty(m)
-    g1 = np.empty(m)
-    gl = np.empty(m)
-    gtmp = np.empty(m)
+    # every array of the step loop is a view into the thread's buffer at ``base``, which
+    # owns no memory: numba counts references on arrays that do at every call that takes
+    # them, two atomic operations each (shared ones, like a row of P, also across threads)
     n_s = max(S - 1, 0)
-    th_s = np.empty(n_s + 2)
-    gs = np.empty((n_s + 2, m))
+    o = 0
+    K = rows_at(base, o, s + 1 + n_extra, n)
+    kp = base + 8 * o  # row i of K is at kp + 8 n i (no views in the step loop)
+    o += (s + 1 + n_extra) * n
+    Q = rows_at(base, o, nq, n)
+    o += nq * n
+    x = vector_at(base, o, n)
+    x_new = vector_at(base, o + n, n)
+    y = vector_at(base, o + 2 * n, n)
+    dy = vector_at(base, o + 3 * n, n)
+    xs = vector_at(base, o + 4 * n, n)
+    f = vector_at(base, o + 5 * n, n)
+    o += 6 * n
+    g = vector_at(base, o, m)
+    g1 = vector_at(base, o + m, m)
+    gl = vector_at(base, o + 2 * m, m)
+    gtmp = vector_at(base, o + 3 * m, m)
+    o += 4 * m
+    th_s = vector_at(base, o, n_s + 2)
+    o += n_s + 2
+    gs = rows_at(base, o, n_s + 2, m)
+    o += (n_s + 2) * m
+    p = vector_at(base, o, p_run.shape[0])
+    for i in range(n):
+        x[i] = x_init[i]
+    for i in range(p_run.shape[0]):
+        p[i] = p_run[i]
     # what _jump_until_flow needs besides the changing (t, x, j, nlog, narc)
     ctx = (args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers)
     t = t0
