@@ -49,7 +49,9 @@ def install_locator() -> None:
     locators = caching.CacheImpl._locator_classes
     if not any(getattr(c, "__name__", "") == "ContentLocator" for c in locators):
         locators.insert(0, _locator_class(caching._CacheLocator))
-    index_key = caching.Cache._index_key
+    index_key = getattr(caching.Cache, "_index_key", None)
+    if index_key is None:  # another numba layout: such functions are compiled again, no harm
+        return
     if not getattr(index_key, "_etobs", False):
 
         def _index_key(self: Any, sig: Any, codegen: Any) -> Any:
