@@ -40,15 +40,15 @@ from etobs.hybrid._kernel import (
     _peak_probe,
     address,
     failed,
-    rows_at,
-    vector_at,
     flow,
     flow_call,
     guard,
     guard_call,
     jump_call,
     load_i64,
+    rows_at,
     run_args,
+    vector_at,
 )
 
 
