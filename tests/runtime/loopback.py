@@ -36,7 +36,9 @@ class LossyLink:
         self.loss, self.duplicate, self.max_delay = loss, duplicate, max_delay
         self.rng = random.Random(seed)
         self.until = until  # stop disturbing after this many datagrams
-        self.stats = {"in": 0, "dropped": 0, "duplicated": 0, "delayed": 0}
+        self.stats = {"in": 0, "dropped": 0, "duplicated": 0, "delayed": 0, "out": 0}
+        self._lock = threading.Lock()
+        self._pending = 0  # delayed datagrams not yet sent
         self._stop = threading.Event()
         self._out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.thread = threading.Thread(target=self._relay, daemon=True)
@@ -58,13 +60,27 @@ class LossyLink:
             delay = self.rng.uniform(0, self.max_delay) if disturb and self.max_delay else 0.0
             if delay:
                 self.stats["delayed"] += 1
-                threading.Timer(delay, self._send, (data, copies)).start()
+                with self._lock:
+                    self._pending += 1
+                threading.Timer(delay, self._send, (data, copies, True)).start()
             else:
                 self._send(data, copies)
 
-    def _send(self, data, copies):
+    def _send(self, data, copies, delayed=False):
         for _ in range(copies):
             self._out.sendto(data, self.target)
+        with self._lock:
+            self.stats["out"] += copies
+            self._pending -= delayed
+
+    def drained(self, sent, received):
+        """Whether the ``sent`` datagrams all reached the relay and all it sent on were ``received``.
+
+        On loopback nothing is lost, so a loaded machine delays this but cannot make it false
+        for good; the server stops waiting after its ``linger`` anyway.
+        """
+        with self._lock:
+            return self.stats["in"] == sent and self._pending == 0 and self.stats["out"] == received
 
     def close(self):
         self._stop.set()
@@ -142,7 +158,14 @@ def live(
         if hostile is not None:
             extra["hostile"] = threading.Thread(target=hostile, args=(port, sent, srv.epoch), daemon=True)
             extra["hostile"].start()
-        finished = lambda: not any(th.is_alive() for th in threads)  # noqa: E731
+
+        def finished():
+            # the senders are done and, behind a relay, everything it sent on has arrived:
+            # stopping earlier would leave datagrams unread and the counts short
+            if any(th.is_alive() for th in threads):
+                return False
+            return relay is None or relay.drained(len(sent), sum(core.counts.values()))
+
         snap = await asyncio.wait_for(
             srv.run_until(duration, finished=finished), timeout=60 + duration / time_scale
         )

@@ -87,7 +87,10 @@ def test_loss_duplication_and_reordering_are_survived():
     pb = linear.problem(PeriodicRule(0.01))
     _, y, ref = reference(pb, [1.0, -0.5], 6.0, 0.005)
     link = {"loss": 0.2, "duplicate": 0.25, "max_delay": 0.01, "seed": 3, "until": 150}
-    snap, _, extra = live(pb, y, 0.005, 6.0, time_scale=4.0, link=link)
+    # hold back 0.4 s of service time (0.1 s of wall time): on a loaded machine a packet
+    # later than the hold-back is applied late (counted in "late") and the estimate
+    # drifts from the reference, which is the service working, not this test's subject
+    snap, _, extra = live(pb, y, 0.005, 6.0, time_scale=4.0, link=link, hold_back=0.4)
     c, st = snap["counts"], extra["link"]
     assert st["dropped"] > 10 and st["duplicated"] > 10 and st["delayed"] > 100
     assert c["forged"] == c["malformed"] == c["future"] == 0
@@ -98,7 +101,7 @@ def test_loss_duplication_and_reordering_are_survived():
     )
     # the node sent what the reference sent; the observer received less
     assert tuple(n.transmissions for n in extra["nodes"]) == ref.transmissions
-    assert final_gap(snap, ref) < 1e-3
+    assert final_gap(snap, ref) < 1e-3, f"late packets: {snap['late']}"
 
 
 def test_a_restarted_sensor_resumes_above_its_old_sequence_numbers(tmp_path):
