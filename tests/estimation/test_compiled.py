@@ -216,6 +216,21 @@ def test_robot_arm_engine_matches_numpy_and_scipy(noise):
         np.testing.assert_allclose(ours.solution.grid.x[0], sci.solution.grid.x[0], rtol=0, atol=1e-6)
 
 
+def test_the_model_text_does_not_grow_with_the_number_of_nodes():
+    """Nodes of one kind share one loop over constant tables: compile time stays flat in N."""
+    from etobs.estimation._model_source import model_source
+    from etobs.examples.robot_arm import robot_arm_network
+    from etobs.model.rules import engine_form_of
+
+    def text(arms):
+        pb = robot_arm_network(arms)
+        return model_source(pb, [engine_form_of(nd.rule) for nd in pb.nodes]).text
+
+    small, large = text(2), text(40)
+    assert len(large.splitlines()) == len(small.splitlines())  # 4 nodes or 80: the same code
+    assert "for jj in range(80):" in large and "for jj in range(4):" in small
+
+
 def test_another_observer_gain_compiles_nothing_new():
     one = compile_problem(robot_arm())
     two = compile_problem(robot_arm(L=2 * L_PAPER))

@@ -129,6 +129,53 @@ class _Node:
 
 
 @dataclass(frozen=True)
+class _Group:
+    """Nodes of one kind (rule, K-functions, number of outputs): the generated code loops over them.
+
+    A loop over a group, with the nodes' offsets in constant tables, keeps the model's
+    text (and its compile time) independent of the number of nodes; its trip count and
+    tables are constants, so the compiler unrolls short ones.
+    """
+
+    index: int
+    nodes: tuple[_Node, ...]
+
+    @property
+    def first(self) -> _Node:
+        return self.nodes[0]
+
+    def tables(self) -> list[str]:
+        """The group's constant tables: node index, rule-state index, numbers offset, outputs."""
+        g = self.index
+        rows = {
+            "I": [nd.index for nd in self.nodes],
+            "S": [nd.s0 for nd in self.nodes],
+            "P": [nd.p0 for nd in self.nodes],
+        }
+        out = [f"G{g}{k} = np.array({v!r}, dtype=np.int64)" for k, v in rows.items()]
+        outs = [list(nd.outputs) for nd in self.nodes]
+        return [*out, f"G{g}O = np.array({outs!r}, dtype=np.int64)"]
+
+    def loop(self) -> list[str]:
+        """Loop header and the node's locals ``i, s0, r, o0, o1, ...``."""
+        return [f"for jj in range({len(self.nodes)}):", *("    " + t for t in self.locals("jj"))]
+
+    def locals(self, jj: str) -> list[str]:
+        """The locals of the node at position ``jj`` (an expression) of the group."""
+        g = self.index
+        out = [f"i = G{g}I[{jj}]", f"s0 = G{g}S[{jj}]", f"r = G{g}P[{jj}]"]
+        return out + [f"o{c} = G{g}O[{jj}, {c}]" for c in range(len(self.first.outputs))]
+
+
+def _groups(nodes: list[_Node]) -> list[_Group]:
+    """The nodes grouped by kind, in the order of their first node."""
+    keyed: dict[tuple[Any, ...], list[_Node]] = {}
+    for nd in nodes:
+        keyed.setdefault((nd.form.kind, nd.kforms, len(nd.outputs)), []).append(nd)
+    return [_Group(g, tuple(members)) for g, members in enumerate(keyed.values())]
+
+
+@dataclass(frozen=True)
 class _Where:
     """Where the generated code finds things: sizes, offsets in ``q``, ``work`` and ``p``."""
 
@@ -191,7 +238,16 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
         ob.psi is not None,
         tuple(signals),
     )
+    groups = _groups(nodes)
     c = _Code()
+    for grp in groups:
+        c.lines(grp.tables())
+    # jump: node k is in group JG[k], at position JP[k]
+    jg = [next(grp.index for grp in groups if nd in grp.nodes) for nd in nodes]
+    jp = [next(grp.nodes.index(nd) for grp in groups if nd in grp.nodes) for nd in nodes]
+    c.line(f"JG = np.array({jg!r}, dtype=np.int64)")
+    c.line(f"JP = np.array({jp!r}, dtype=np.int64)")
+    c.line("")
     # one C function (:func:`etobs.compile.functions.c_signature`), compiled once: the
     # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of node
     # k >= 0, and gives each run a scratch array of n_work + 1 floats
@@ -203,16 +259,16 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("if k == -1:")
     c.indent()
     c.line(f"dq = carray(outp, ({lay.n},))")
-    _flow(c, at, nodes)
+    _flow(c, at, groups)
     c.line("return 1")
     c.dedent()
     c.line("if k == -2:")
     c.indent()
     c.line(f"g = carray(outp, ({len(nodes)},))")
-    _guard(c, at, nodes)
+    _guard(c, at, groups)
     c.line("return 1")
     c.dedent()
-    _jump(c, at, nodes)
+    _jump(c, at, groups)
     c.line("return 1")
     c.dedent()
     src.text = c.text()
@@ -241,7 +297,7 @@ def _node(src: ModelSource, i: int, nd: Any, form: EngineForm, s0: int) -> _Node
     return _Node(i, form, tuple(int(k) for k in nd.outputs), s0, src.put(numbers), tuple(kforms))
 
 
-def _flow(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+def _flow(c: _Code, at: _Where, groups: list[_Group]) -> None:
     """``dq = q'`` (eq. (2), (7), (14), (44))."""
     w, nx, nz, ny, nu, nv = at.w, at.nx, at.nz, at.ny, at.nu, at.nv
     c.lines(_signal(0, at.signals[0], w["u"]))
@@ -261,61 +317,71 @@ def _flow(c: _Code, at: _Where, nodes: list[_Node]) -> None:
     c.line(f"for ii in range({ny}):")
     c.line(f"    dq[{at.yb0} + ii] = 0.0")
     c.lines(_ytilde(at))
-    for nd in nodes:
-        kind = nd.form.kind
-        if kind in (DYNAMIC, GENERALIZED):
+    for grp in groups:
+        kind = grp.first.form.kind
+        if kind not in (DYNAMIC, GENERALIZED, PERIODIC):
+            continue
+        c.lines(grp.loop())
+        c.indent()
+        if kind == PERIODIC:
+            c.line("dq[s0] = 1.0")
+        else:
             # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
-            c.line(f"e = {_norm(nd, at, False)}")
-            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "av"))
+            c.line(f"e = {_norm(grp, at, False)}")
+            c.lines(_kcall(grp, A, "q[s0]", "av"))
             if kind == DYNAMIC:
-                c.lines(_kcall(nd, G, "e", "gv"))
-                c.line(f"gv = p[{nd.p0 + P_C}] * gv")
+                c.lines(_kcall(grp, G, "e", "gv"))
+                c.line(f"gv = p[r + {P_C}] * gv")
             else:
-                c.lines(_kcall(nd, GC, "e", "gv"))
-            c.line(f"dq[{nd.s0}] = -av + gv")
-        elif kind == PERIODIC:
-            c.line(f"dq[{nd.s0}] = 1.0")
+                c.lines(_kcall(grp, GC, "e", "gv"))
+            c.line("dq[s0] = -av + gv")
+        c.dedent()
 
 
-def _guard(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
     """Every node's trigger function (eq. (15), (45)): the node sends when ``g_i >= 0``."""
     c.lines(_ytilde(at))
-    for nd in nodes:
-        kind, r, i = nd.form.kind, nd.p0, nd.index
+    for grp in groups:
+        kind = grp.first.form.kind
+        c.lines(grp.loop())
+        c.indent()
         if kind == PERIODIC:
-            c.line(f"g[{i}] = q[{nd.s0}] - p[{r + P_PERIOD}]")
-            continue
-        c.line(f"e = {_norm(nd, at, False)}")
-        if kind == RELATIVE:
-            c.line(f"g[{i}] = e - p[{r + P_RHO}] * {_norm(nd, at, True)} - p[{r + P_EPS}]")
-            continue
-        c.lines(_kcall(nd, G, "e", "gv"))
-        if kind == STATIC:
-            c.line(f"g[{i}] = gv - p[{r + P_EPS}]")
-        elif kind == DYNAMIC:
-            # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
-            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "av"))
-            c.line(f"g[{i}] = gv - p[{r + P_SIGMA}] * av - p[{r + P_EPS}]")
+            c.line(f"g[i] = q[s0] - p[r + {P_PERIOD}]")
+        elif kind == RELATIVE:
+            c.line(f"e = {_norm(grp, at, False)}")
+            c.line(f"g[i] = e - p[r + {P_RHO}] * {_norm(grp, at, True)} - p[r + {P_EPS}]")
         else:
-            # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
-            c.lines(_kcall(nd, D, f"q[{nd.s0}]", "w"))
-            c.lines(_kcall(nd, GC, "e", "gc"))
-            c.lines(_kcall(nd, A, f"q[{nd.s0}]", "ac"))
-            c.line(f"g[{i}] = gv + w * gc - p[{r + P_SIGMA}] * w * ac - p[{r + P_EPS}]")
+            c.line(f"e = {_norm(grp, at, False)}")
+            c.lines(_kcall(grp, G, "e", "gv"))
+            if kind == STATIC:
+                c.line(f"g[i] = gv - p[r + {P_EPS}]")
+            elif kind == DYNAMIC:
+                # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
+                c.lines(_kcall(grp, A, "q[s0]", "av"))
+                c.line(f"g[i] = gv - p[r + {P_SIGMA}] * av - p[r + {P_EPS}]")
+            else:
+                # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
+                c.lines(_kcall(grp, D, "q[s0]", "w"))
+                c.lines(_kcall(grp, GC, "e", "gc"))
+                c.lines(_kcall(grp, A, "q[s0]", "ac"))
+                c.line(f"g[i] = gv + w * gc - p[r + {P_SIGMA}] * w * ac - p[r + {P_EPS}]")
+        c.dedent()
 
 
-def _jump(c: _Code, at: _Where, nodes: list[_Node]) -> None:
+def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
     """Node ``k`` sends ``ytilde_k`` (eq. (22): ``e_k+ = 0``) and resets its own rule state."""
     c.lines(_ytilde(at))
-    for nd in nodes:
-        c.line(f"{'if' if nd.index == 0 else 'elif'} k == {nd.index}:")
+    c.line("gk = JG[k]")
+    for grp in groups:
+        c.line(f"{'if' if grp.index == 0 else 'elif'} gk == {grp.index}:")
         c.indent()
-        for idx in nd.outputs:
-            c.line(f"q[{at.yb0 + idx}] = work[{at.w['ytilde'] + idx}]")
-        if nd.form.kind in (DYNAMIC, GENERALIZED):
-            c.line(f"q[{nd.s0}] = p[{nd.p0 + P_B}] * q[{nd.s0}]  # eta+ = b eta")
-        elif nd.form.kind == PERIODIC:
-            c.line(f"q[{nd.s0}] = 0.0")
+        c.lines(grp.locals("JP[k]"))
+        for o in range(len(grp.first.outputs)):
+            c.line(f"q[{at.yb0} + o{o}] = work[{at.w['ytilde']} + o{o}]")
+        if grp.first.form.kind in (DYNAMIC, GENERALIZED):
+            c.line(f"q[s0] = p[r + {P_B}] * q[s0]  # eta+ = b eta")
+        elif grp.first.form.kind == PERIODIC:
+            c.line("q[s0] = 0.0")
         c.dedent()
 
 
@@ -385,22 +451,22 @@ def _ytilde(at: _Where) -> list[str]:
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
 
 
-def _norm(nd: _Node, at: _Where, relative: bool) -> str:
+def _norm(grp: _Group, at: _Where, relative: bool) -> str:
     """``|e_i| = |ybar_i - ytilde_i|``, or ``|ytilde_i|`` when ``relative``, as an expression."""
     wy = at.w["ytilde"]
     terms = []
-    for k in nd.outputs:
-        d = f"work[{wy + k}]" if relative else f"(q[{at.yb0 + k}] - work[{wy + k}])"
+    for o in range(len(grp.first.outputs)):
+        d = f"work[{wy} + o{o}]" if relative else f"(q[{at.yb0} + o{o}] - work[{wy} + o{o}])"
         terms.append(f"{d} * {d}")
     return f"np.sqrt({' + '.join(terms)})"
 
 
-def _kcall(nd: _Node, slot: int, s: str, out: str) -> list[str]:
-    """``out = K(s)`` for K-function ``slot`` of node ``nd``."""
-    kform = nd.kforms[slot]
+def _kcall(grp: _Group, slot: int, s: str, out: str) -> list[str]:
+    """``out = K(s)`` for K-function ``slot`` of the group's nodes."""
+    kform = grp.first.kforms[slot]
     assert kform is not None, "the rule's kind uses this slot"
     kind, glob = kform
-    r = nd.p0 + P_F + 2 * slot
+    r = P_F + 2 * slot
     if kind == CUSTOM:
         return [f"{out} = float({glob}({s}))"]
-    return [f"{out} = {_KFORMS[kind].format(k1=f'p[{r}]', k2=f'p[{r + 1}]', s=s)}"]
+    return [f"{out} = {_KFORMS[kind].format(k1=f'p[r + {r}]', k2=f'p[r + {r + 1}]', s=s)}"]
