@@ -262,13 +262,19 @@ def test_a_function_numba_cannot_compile_is_named_and_scipy_runs_it():
 
 
 def _fails_past(f_p):
-    """Two runs of ``x' = 1`` whose plant ``f_p`` fails once ``x > 1.5``: from 1 (at t = 0.5) and -5."""
+    """Two runs of ``x' = 1 + t`` whose ``f_p`` fails once ``x > 1.5``: from 1 (at t = sqrt(2) - 1) and -5."""
     plant = Plant(f_p=f_p, h=lambda x: x.copy(), n_x=1, n_y=1)
     observer = Observer(f_o=lambda t, z, u, ybar, yhat: np.zeros(1), n_z=1)
     pb = EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), send_on_delta(0.1))])
     res = simulate(pb, [[1.0], [-5.0]], 1.0, backend="engine")
     assert res.status_labels() == ["model_error", "completed"]
-    assert res.solution.t_final[0] <= 0.5 + 1e-9  # x = 1 + t reaches 1.5 at t = 0.5
+    t_final, x_final = res.solution.t_final[0], res.solution.x_final[0, 0]
+    assert t_final <= math.sqrt(2.0) - 1.0 + 1e-9  # x = 1 + t + t^2/2 reaches 1.5 there
+    # the run ends at its last good state: no step is taken on an output left unwritten
+    assert x_final == pytest.approx(1.0 + t_final + t_final**2 / 2, abs=1e-8)
+    grid = simulate(pb, [[1.0]], 1.0, backend="engine", save=SaveAt(steps=False, grid=np.linspace(0, 1, 101)))
+    filled = grid.solution.grid.t[grid.solution.grid.j[0] >= 0]
+    assert filled.max() <= t_final + 1e-12  # nothing saved past the failure
     return res
 
 
@@ -276,7 +282,7 @@ def test_wrong_shape_during_a_run_is_a_model_error_naming_the_function():
     def f_p(t, x, u, v):
         if x[0] > 1.5:
             return np.zeros(2)
-        return np.ones(1)
+        return np.array([1.0 + t])
 
     assert "`f_p` returned the wrong shape" in _fails_past(f_p).messages()[0]
 
@@ -287,7 +293,7 @@ def test_a_function_that_raises_during_a_run_is_a_model_error_of_the_estimation_
     def f_p(t, x, u, v):
         if x[0] > 1.5:
             raise ValueError("x too large")
-        return np.ones(1)
+        return np.array([1.0 + t])
 
     # the user functions are compiled into the model: numba prints the exception, and the
     # message names the model's call, not a function that may not be the one that raised

@@ -75,8 +75,8 @@ def _system(slot, k, t, x, p, args, out):
 
     ``args`` is the run's tuple of addresses (:func:`run_args`); ``x``, ``p`` and ``out``
     are arrays or addresses. On failure, record the run's first failure (``16 * slot +
-    st`` unless ``st`` is already a code); the kernel stops the run at the end of the
-    step.
+    st`` unless ``st`` is already a code); ``out`` may be left partly written, so the
+    kernel does not take the step and ends the run at its last good state.
     """
     st = ccall(args[slot - 1], k, t, x, args[4], args[5], args[4], args[3], p, out)
     if st != 1 and load_i64(args[6]) == 0:

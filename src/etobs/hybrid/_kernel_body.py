@@ -242,6 +242,8 @@ def _solve_one(
             h = first_step
         else:
             h = _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, xs)
+            if failed(args):
+                st = MODEL_ERROR
 
     while st == RUNNING:
         # ---- one step (see _FastSolver._advance) ----
@@ -282,7 +284,9 @@ def _solve_one(
             err = 0.0 if denom == 0.0 else abs(hh) * e5 / np.sqrt(denom * n)
         else:
             err = abs(hh) * np.sqrt(e5 / n)
-        finite = np.isfinite(err) and _all_finite(x_new) and _row_finite(K, s)
+        # a failed call leaves its output unwritten: the step must not be taken (the run
+        # then ends with model_error at its last good state)
+        finite = np.isfinite(err) and _all_finite(x_new) and _row_finite(K, s) and not failed(args)
         accept = finite and err <= 1.0
         if err == 0.0:
             factor = MAX_FACTOR
@@ -311,10 +315,14 @@ def _solve_one(
             if have_q:
                 _dense_coeffs(args, p, t_start, x, x_new, K, hh, Q, y, dy)
             theta_ev = np.nan
-            if m > 0:
+            if m > 0 and not failed(args):
                 theta_ev = _locate(
                     args, p, t_start, hh, x, Q, nq, dop853, g, g1, gl, gtmp, S, th_s, gs, xs, xtol_t
                 )
+            if failed(args):  # the guard or the dense output failed: keep the last good state
+                accept = False
+                st = MODEL_ERROR
+        if accept:
             t_stop = t1
             if np.isfinite(theta_ev) and theta_ev < 1.0:
                 t_stop = t_start + theta_ev * hh
