@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from etobs.compile.functions import FunctionSpec
+from etobs.estimation.calls import model_specs
 from etobs.model.functions import CONSTANT, CUSTOM, LINEAR, POWER, QUADRATIC
 from etobs.model.rules import DYNAMIC, GENERALIZED, PERIODIC, RELATIVE, STATIC, EngineForm
 from etobs.model.signals import CONSTANT as SIG_CONSTANT
@@ -204,11 +205,8 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     tp = src.put(pl.params)
     to = src.put(ob.params)
     npp, npo = pl.params.size, ob.params.size
-    src.user(pl.f_p, "F_P", "f_p", FunctionSpec("t, A0, A1, A2", (nx, nu, nv), nx, npp))
-    src.user(pl.h, "H", "h", FunctionSpec("A0", (nx,), ny, npp))
-    src.user(ob.f_o, "F_O", "f_o", FunctionSpec("t, A0, A1, A2, A3", (nz, nu, ny, ny), nz, npo))
-    if ob.psi is not None:
-        src.user(ob.psi, "PSI", "psi", FunctionSpec("A0", (nz,), nx, npo))
+    for name, (fn, spec, _) in model_specs(problem).items():
+        src.user(fn, name.upper(), name, spec)  # globals F_P, H, F_O, PSI
     # scratch: u, v, xhat, yhat, ytilde, m
     offsets = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
     src.n_work = offsets[-1]

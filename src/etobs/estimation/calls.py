@@ -27,21 +27,9 @@ class ModelCalls:
         self.compiled = compiled
         self._fns: dict[str, Any] = {}
         if compiled:
-            from etobs.compile.functions import FunctionSpec, compile_function
+            from etobs.compile.functions import compile_function
 
-            pl, ob = problem.plant, problem.observer
-            nx, nz, ny, nu, nv = pl.n_x, ob.n_z, pl.n_y, pl.n_u, pl.n_v
-            specs = {
-                "f_p": (pl.f_p, FunctionSpec("t, A0, A1, A2", (nx, nu, nv), nx, pl.params.size), pl.params),
-                "h": (pl.h, FunctionSpec("A0", (nx,), ny, pl.params.size), pl.params),
-                "f_o": (
-                    ob.f_o,
-                    FunctionSpec("t, A0, A1, A2, A3", (nz, nu, ny, ny), nz, ob.params.size),
-                    ob.params,
-                ),
-            }
-            if ob.psi is not None:
-                specs["psi"] = (ob.psi, FunctionSpec("A0", (nz,), nx, ob.params.size), ob.params)
+            specs = model_specs(problem)
             for name, (fn, spec, params) in specs.items():
                 self._fns[name] = (
                     compile_function(fn, spec, name),
@@ -94,6 +82,22 @@ class ModelCalls:
             return self._run("psi", np.zeros(z.shape[0]), z)
         ob = self.pb.observer
         return _rows("psi", n_x, [ob.call_psi(z[b], n_x) for b in range(z.shape[0])])
+
+
+def model_specs(problem: EstimationProblem) -> dict[str, tuple[Any, Any, np.ndarray]]:
+    """How etobs calls ``f_p``, ``h``, ``f_o`` (and ``psi``): ``name: (function, FunctionSpec, params)``."""
+    from etobs.compile.functions import FunctionSpec
+
+    pl, ob = problem.plant, problem.observer
+    nx, nz, ny, nu, nv = pl.n_x, ob.n_z, pl.n_y, pl.n_u, pl.n_v
+    specs = {
+        "f_p": (pl.f_p, FunctionSpec("t, A0, A1, A2", (nx, nu, nv), nx, pl.params.size), pl.params),
+        "h": (pl.h, FunctionSpec("A0", (nx,), ny, pl.params.size), pl.params),
+        "f_o": (ob.f_o, FunctionSpec("t, A0, A1, A2, A3", (nz, nu, ny, ny), nz, ob.params.size), ob.params),
+    }
+    if ob.psi is not None:
+        specs["psi"] = (ob.psi, FunctionSpec("A0", (nz,), nx, ob.params.size), ob.params)
+    return specs
 
 
 def _rows(name: str, n: int, rows: list[Any]) -> np.ndarray:
