@@ -40,13 +40,15 @@ def real(
     return v
 
 
-def integer(name: str, value: Any, *, lower: int | None = None) -> int:
-    """Return ``value`` as an int after checking its type and lower bound."""
+def integer(name: str, value: Any, *, lower: int | None = None, upper: int | None = None) -> int:
+    """Return ``value`` as an int after checking its type and bounds."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise InputTypeError(f"`{name}` must be an integer; got {value!r} ({type(value).__name__})")
     v = int(value)
     if lower is not None and v < lower:
         raise InputError(f"`{name}` must be an integer >= {lower}; got {v}")
+    if upper is not None and v > upper:
+        raise InputError(f"`{name}` must be an integer <= {upper}; got {v}")
     return v
 
 

@@ -81,7 +81,8 @@ def test_the_fate_of_a_run_does_not_depend_on_its_batch():
     for key, counts in both.network_stats().items():
         np.testing.assert_array_equal(counts[1], alone.network_stats()[key][0])
     other = simulate(pb, X0[1:], 3.0, z0=np.zeros(2))
-    assert other.network_stats()["lost"][0, 0] != alone.network_stats()["lost"][0, 0]
+    t_other, t_alone = other.deliveries.t, alone.deliveries.t
+    assert t_other.shape != t_alone.shape or not np.allclose(t_other, t_alone)
 
 
 def test_observer_keeps_the_last_value_received():
@@ -134,11 +135,37 @@ def test_gilbert_elliott_rate_and_burst_length():
     assert 3.5 < bursts.mean() < 4.5
 
 
-def test_delay_distributions_have_their_means():
-    rng = np.random.default_rng(0)
-    assert UniformDelay(0.01, 0.03).sample(rng, 20000).mean() == pytest.approx(0.02, rel=0.01)
-    d = ExponentialDelay(scale=0.01, minimum=0.005).sample(rng, 20000)
+def _delays(delay, n=20000):
+    stream = PacketStream(Link(delay=delay), seed=3, run=0, channel=0)
+    return np.array([stream.fate(k)[1] for k in range(1, n + 1)])
+
+
+def test_delay_distributions_have_their_means_and_quantiles():
+    d = _delays(UniformDelay(0.01, 0.03))
+    assert d.min() >= 0.01 and d.max() <= 0.03
+    assert d.mean() == pytest.approx(0.02, rel=0.01)
+    np.testing.assert_allclose(np.quantile(d, [0.25, 0.75]), [0.015, 0.025], atol=5e-4)
+    d = _delays(ExponentialDelay(scale=0.01, minimum=0.005))
     assert d.min() >= 0.005 and d.mean() == pytest.approx(0.015, rel=0.03)
+    # Exp(0.01) has median 0.01 ln 2
+    assert np.median(d) - 0.005 == pytest.approx(0.01 * np.log(2), rel=0.03)
+    assert ExponentialDelay(scale=0.01, minimum=0.005).mean == pytest.approx(0.015)
+
+
+def test_packet_fates_are_independent_draws():
+    """The counter-based draws (etobs.model.fates): no correlation between successive
+    packets, between nodes or between runs, and a uniform histogram."""
+    from etobs.model.fates import uniform
+
+    u = np.array([[uniform(5, run, ch, k, 2) for k in range(1, 4001)] for run in range(2) for ch in range(2)])
+    assert np.all((u >= 0) & (u < 1))
+    counts = np.histogram(u.ravel(), bins=20, range=(0, 1))[0]
+    expected = u.size / 20
+    assert np.sum((counts - expected) ** 2 / expected) < 50  # chi2(19): p < 1e-4 above 43.8
+    for a in range(4):
+        assert abs(np.corrcoef(u[a, :-1], u[a, 1:])[0, 1]) < 0.06
+        for b in range(a):
+            assert abs(np.corrcoef(u[a], u[b])[0, 1]) < 0.06
 
 
 def test_input_nodes_can_have_their_own_link():
@@ -160,6 +187,10 @@ def test_network_errors_name_the_argument():
         Link(loss="bursty")
     with pytest.raises(InputError, match=r"`capacity` must be an integer >= 1; got 0"):
         Link(capacity=0)
+    with pytest.raises(
+        InputError, match=r"`seed` must be an integer <= 9223372036854775807; got 9223372036854775808"
+    ):
+        Network(Link(), seed=2**63)
     with pytest.raises(InputError, match=r"`high` must be >= 0.2; got 0.1"):
         UniformDelay(0.2, 0.1)
     with pytest.raises(InputError, match=r"`network.links` has 3 links but the problem has 1 nodes"):

@@ -27,19 +27,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from etobs.estimation import _network_jumps as nj
+from etobs.estimation._network_jumps import N_META
 from etobs.hybrid.system import BatchedSystem
-from etobs.model.network import Link, PacketStream
+from etobs.model.network import Link
 from etobs.model.rules import TriggerRule
 
 if TYPE_CHECKING:
     from etobs.estimation.calls import ModelCalls
     from etobs.estimation.problem import EstimationProblem
-
-#: Arrival time of an empty packet slot (finite: the solver rejects non-finite states).
-EMPTY = 1e30
-#: Entries of a channel's network block before its packet slots.
-SEQ, APPLIED, LOST, OVERFLOW, STALE, N_APPLIED = range(6)
-N_META = 6
 
 
 @dataclass(frozen=True)
@@ -87,7 +83,7 @@ class _Assembly:
         self.channels: tuple[Channel, ...] = pb.layout.channels
         self.innovation = pb.hold == "innovation"
         self.networked = pb.network is not None
-        self.streams: dict[tuple[int, int], PacketStream] = {}
+        self.links = tuple(None if ch.link is None else ch.link.form() for ch in self.channels)
         self.u_held = [ch for ch in self.channels if ch.kind == "u"]
 
     # -- the signals every channel reads -------------------------------------------
@@ -156,9 +152,10 @@ class _Assembly:
         for c, ch in enumerate(self.channels):
             sig, meas = self._source(ch, yt, u, yhat)
             g[:, off + c] = self._trigger(ch, t, q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # (15), (53)
-            if self.networked:
-                arrival = q[:, slot_columns(ch)[0]].min(axis=1)
-                g[:, c] = np.maximum(t - arrival, -1.0)  # a packet's arrival time has come
+            if self.networked:  # a packet's arrival time has come
+                assert ch.net is not None and ch.link is not None
+                for r in range(q.shape[0]):
+                    g[r, c] = nj.arrival_gap(q[r], t[r], ch.net.start, ch.size, ch.link.capacity)
         return g
 
     def jump(self, k: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -179,56 +176,20 @@ class _Assembly:
         qn[:, ch.rule_state] = ch.rule.reset(t, q[:, ch.rule_state])
         if ch.net is None:
             return qn
-        assert ch.link is not None and self.lay.run is not None
-        arrival, seqcol, values = slot_columns(ch)
-        meta = ch.net.start
+        assert ch.link is not None and self.lay.run is not None and self.pb.network is not None
         for r in range(q.shape[0]):
-            seq = q[r, meta + SEQ] + 1.0
-            qn[r, meta + SEQ] = seq
-            lost, delay = self._stream(ch, c, int(q[r, self.lay.run])).fate(int(seq))
-            if lost:
-                qn[r, meta + LOST] += 1.0
-            elif delay == 0.0:
-                qn[r, ch.held] = sig[r]
-                qn[r, meta + APPLIED] = seq
-                qn[r, meta + N_APPLIED] += 1.0
-            else:
-                free = np.flatnonzero(q[r, arrival] >= EMPTY)
-                if not free.size:
-                    qn[r, meta + OVERFLOW] += 1.0
-                    continue
-                s = free[0]
-                qn[r, arrival[s]] = t[r] + delay
-                qn[r, seqcol[s]] = seq
-                qn[r, values[s]] = sig[r]
+            nj.send(
+                qn[r], t[r], self.pb.network.seed, int(q[r, self.lay.run]), c, ch.net.start,
+                ch.sent, ch.held, ch.size, ch.link.capacity, self.links[c],
+            )  # fmt: skip
         return qn
 
     def _deliver(self, ch: Channel, t: np.ndarray, q: np.ndarray) -> np.ndarray:
-        # the packet with the earliest arrival reaches the observer; it is applied only
-        # if newer than the last one applied (a late, reordered packet is stale)
-        assert ch.net is not None
-        arrival, seqcol, values = slot_columns(ch)
-        meta = ch.net.start
+        assert ch.net is not None and ch.link is not None
         qn = q.copy()
         for r in range(q.shape[0]):
-            s = int(np.argmin(q[r, arrival]))
-            if q[r, arrival[s]] >= EMPTY:
-                continue
-            qn[r, arrival[s]] = EMPTY
-            if q[r, seqcol[s]] > q[r, meta + APPLIED]:
-                qn[r, ch.held] = q[r, values[s]]
-                qn[r, meta + APPLIED] = q[r, seqcol[s]]
-                qn[r, meta + N_APPLIED] += 1.0
-            else:
-                qn[r, meta + STALE] += 1.0
+            nj.deliver(qn[r], ch.net.start, ch.held, ch.size, ch.link.capacity)
         return qn
-
-    def _stream(self, ch: Channel, c: int, run: int) -> PacketStream:
-        key = (run, c)
-        if key not in self.streams:
-            assert ch.link is not None and self.pb.network is not None
-            self.streams[key] = PacketStream(ch.link, self.pb.network.seed, run, c)
-        return self.streams[key]
 
     def system(self) -> BatchedSystem:
         names = tuple(ch.name for ch in self.channels)

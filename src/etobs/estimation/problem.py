@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from etobs.errors import InputError, InputTypeError, ModelError
-from etobs.estimation.assembly import N_META, Channel
+from etobs.estimation._network_jumps import N_META
+from etobs.estimation.assembly import Channel
 from etobs.hybrid.system import BatchedSystem
 from etobs.model.network import Network
 from etobs.model.node import InputNode, Node
@@ -205,7 +206,8 @@ class EstimationProblem:
         packets' fates from the stream ``(seed, run_ids[b], node)`` (default
         ``run_ids = 0 .. B-1``).
         """
-        from etobs.estimation.assembly import EMPTY, slot_columns
+        from etobs.estimation._network_jumps import EMPTY
+        from etobs.estimation.assembly import slot_columns
 
         b = x0.shape[0]
         lay = self.layout

@@ -117,7 +117,8 @@ class EstimationResult:
         pb = self.problem
         if pb.network is None:
             raise InputError("this problem has no network: give EstimationProblem(network=Network(...))")
-        from etobs.estimation.assembly import EMPTY, LOST, N_APPLIED, OVERFLOW, STALE, slot_columns
+        from etobs.estimation._network_jumps import EMPTY, LOST, N_APPLIED, OVERFLOW, STALE
+        from etobs.estimation.assembly import slot_columns
 
         q = self.solution.x_final
         C = pb.n_channels

@@ -25,21 +25,21 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
+from etobs.model import fates
+from etobs.model.fates import MAX_DELAY
 
-_BLOCK = 256  # packets drawn at once per stream
-MAX_DELAY = 1e9  # seconds; far below the solver's empty-slot marker
+#: Seeds, run indices and sequence numbers stay below this (64-bit integers in the engine).
+MAX_SEED = 2**63 - 1
 
 
 class Delay(ABC):
     """Distribution of a packet's transmission delay (seconds)."""
 
     @abstractmethod
-    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """``n`` independent delays."""
+    def form(self) -> tuple[int, float, float]:
+        """The delay kind and its two numbers (:func:`etobs.model.fates.delay_quantile`)."""
 
     @property
     @abstractmethod
@@ -56,8 +56,8 @@ class ConstantDelay(Delay):
     def __post_init__(self) -> None:
         object.__setattr__(self, "d", v.real("d", self.d, lower=0.0, upper=MAX_DELAY))
 
-    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return np.full(n, self.d)
+    def form(self) -> tuple[int, float, float]:
+        return fates.CONSTANT, self.d, 0.0
 
     @property
     def mean(self) -> float:
@@ -75,8 +75,8 @@ class UniformDelay(Delay):
         object.__setattr__(self, "low", v.real("low", self.low, lower=0.0))
         object.__setattr__(self, "high", v.real("high", self.high, lower=self.low, upper=MAX_DELAY))
 
-    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return rng.uniform(self.low, self.high, n)
+    def form(self) -> tuple[int, float, float]:
+        return fates.UNIFORM, self.low, self.high
 
     @property
     def mean(self) -> float:
@@ -96,8 +96,8 @@ class ExponentialDelay(Delay):
         )
         object.__setattr__(self, "minimum", v.real("minimum", self.minimum, lower=0.0, upper=MAX_DELAY))
 
-    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return self.minimum + rng.exponential(self.scale, n)
+    def form(self) -> tuple[int, float, float]:
+        return fates.EXPONENTIAL, self.scale, self.minimum
 
     @property
     def mean(self) -> float:
@@ -108,8 +108,8 @@ class Loss(ABC):
     """Packet-loss process of a link."""
 
     @abstractmethod
-    def draw(self, rng: np.random.Generator, n: int, state: int) -> tuple[np.ndarray, int]:
-        """Whether each of the next ``n`` packets is lost, and the process state after them."""
+    def form(self) -> tuple[int, float, float, float, float]:
+        """The loss kind and its four numbers (:func:`etobs.model.fates.fate`)."""
 
     @property
     @abstractmethod
@@ -126,8 +126,8 @@ class BernoulliLoss(Loss):
     def __post_init__(self) -> None:
         object.__setattr__(self, "p", v.real("p", self.p, lower=0.0, upper=1.0))
 
-    def draw(self, rng: np.random.Generator, n: int, state: int) -> tuple[np.ndarray, int]:
-        return rng.random(n) < self.p, state
+    def form(self) -> tuple[int, float, float, float, float]:
+        return fates.BERNOULLI, self.p, 0.0, 0.0, 0.0
 
     @property
     def rate(self) -> float:
@@ -156,16 +156,8 @@ class GilbertElliottLoss(Loss):
         object.__setattr__(self, "loss_good", v.real("loss_good", self.loss_good, lower=0.0, upper=1.0))
         object.__setattr__(self, "loss_bad", v.real("loss_bad", self.loss_bad, lower=0.0, upper=1.0))
 
-    def draw(self, rng: np.random.Generator, n: int, state: int) -> tuple[np.ndarray, int]:
-        move, lose = rng.random(n), rng.random(n)
-        lost = np.empty(n, dtype=bool)
-        for k in range(n):
-            if state == 0 and move[k] < self.p_gb:
-                state = 1
-            elif state == 1 and move[k] < self.p_bg:
-                state = 0
-            lost[k] = lose[k] < (self.loss_bad if state else self.loss_good)
-        return lost, state
+    def form(self) -> tuple[int, float, float, float, float]:
+        return fates.GILBERT_ELLIOTT, self.p_gb, self.p_bg, self.loss_good, self.loss_bad
 
     @property
     def rate(self) -> float:
@@ -223,6 +215,11 @@ class Link:
         """Whether every packet arrives at once (a constant zero delay)."""
         return isinstance(self.delay, ConstantDelay) and self.delay.d == 0.0
 
+    def form(self) -> tuple[float, ...]:
+        """The link's :data:`~etobs.model.fates.LINK_WIDTH` numbers for :func:`~etobs.model.fates.fate`."""
+        loss = (fates.NO_LOSS, 0.0, 0.0, 0.0, 0.0) if self.loss is None else self.loss.form()  # type: ignore[union-attr]
+        return tuple(float(a) for a in (*loss, *self.delay.form()))  # type: ignore[union-attr]
+
 
 @dataclass(frozen=True)
 class Network:
@@ -261,7 +258,7 @@ class Network:
         if not links:
             raise InputError("`links` must hold at least one Link")
         object.__setattr__(self, "links", links)
-        object.__setattr__(self, "seed", v.integer("seed", self.seed, lower=0))
+        object.__setattr__(self, "seed", v.integer("seed", self.seed, lower=0, upper=MAX_SEED))
 
     def link(self, channel: int, n_channels: int) -> Link:
         """The link of node ``channel`` out of ``n_channels``."""
@@ -279,27 +276,22 @@ class Network:
 class PacketStream:
     """The fates of the packets of one node in one run: ``fate(k)`` for ``k = 1, 2, ...``.
 
-    Deterministic in ``(seed, run, channel)``; drawn in blocks as needed.
+    Deterministic in ``(seed, run, channel)`` (:mod:`etobs.model.fates`); the engine
+    draws the same fates in its compiled model.
     """
 
     def __init__(self, link: Link, seed: int, run: int, channel: int) -> None:
-        self._link = link
-        self._rng = np.random.default_rng(np.random.SeedSequence([seed, run, channel]))
-        self._lost = np.zeros(0, dtype=bool)
-        self._delay = np.zeros(0)
-        self._state = 0
+        self._link = link.form()
+        self._key = (int(seed), int(run), int(channel))
+        self._fates: list[tuple[bool, float]] = []
+        self._state = 0  # the loss chain's state after the fates drawn so far
 
     def fate(self, k: int) -> tuple[bool, float]:
         """Whether packet ``k`` (1-based sequence number) is lost, and its delay."""
-        while k > self._lost.shape[0]:
-            loss = self._link.loss
-            if loss is None:
-                lost = np.zeros(_BLOCK, dtype=bool)
-            else:
-                assert isinstance(loss, Loss)
-                lost, self._state = loss.draw(self._rng, _BLOCK, self._state)
-            assert isinstance(self._link.delay, Delay)
-            delay = np.minimum(self._link.delay.sample(self._rng, _BLOCK), MAX_DELAY)
-            self._lost = np.concatenate([self._lost, lost])
-            self._delay = np.concatenate([self._delay, delay])
-        return bool(self._lost[k - 1]), float(self._delay[k - 1])
+        seed, run, channel = self._key
+        while k > len(self._fates):
+            lost, delay, self._state = fates.fate(
+                seed, run, channel, len(self._fates) + 1, self._state, self._link
+            )
+            self._fates.append((lost, delay))
+        return self._fates[k - 1]
