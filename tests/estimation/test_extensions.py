@@ -96,20 +96,6 @@ def test_input_nodes_are_validated():
         InputNode((0,), 1.0)
 
 
-@pytest.mark.parametrize("backend", ["engine", "numba"])  # "numba" is the engine's earlier name
-def test_engine_refuses_the_extensions_and_auto_falls_back_to_numpy(backend):
-    pb = linear.problem(StaticRule(gamma=Linear(1.0), eps=0.1), hold="innovation")
-    with pytest.raises(
-        InputError,
-        match=r"backend='engine': the engine models the base setting with etobs' rules; this problem uses "
-        r"hold='innovation' \(Remark 3\); use backend='numpy' or 'scipy'",
-    ):
-        simulate(pb, X0[:1], 1.0, backend=backend)
-    res = simulate(pb, X0[:1], 1.0, z0=Z0)
-    assert res.backend == "numpy"
-    assert "hold='innovation' (Remark 3)" in res.backend_reason
-
-
 # -- relative threshold -------------------------------------------------------------------
 
 

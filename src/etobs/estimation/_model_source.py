@@ -1,9 +1,12 @@
 """The hybrid model (16)--(22) of one problem as Python source, for the engine to compile.
 
 :func:`model_source` writes the flow, guard and jump of one run for a given problem
-*structure*: the sizes, which outputs each node sends, the kinds of its rule, K-functions
-and signals, and the user's functions, which the generated code calls directly (numba
-compiles them into it, so a call costs what an inlined one does). The problem's
+*structure*: the sizes, which outputs (or inputs, section 7.3) each node sends, the
+kinds of its rule, K-functions and signals, the hold (Remark 3), the network's links,
+and the user's functions, which the generated code calls directly (numba compiles them
+into it, so a call costs what an inlined one does). It is the model of
+:mod:`etobs.estimation.assembly` (state layout, jump rules, order) for one run; the
+network's packets go through the same scalar functions (:mod:`etobs.estimation._network_jumps`). The problem's
 *numbers* (the plant's and observer's ``params``, signal amplitudes, rule parameters) are
 read from the run's parameter vector ``p`` at fixed offsets, so problems that differ only
 in numbers share the compiled model.
@@ -22,7 +25,9 @@ from typing import Any
 import numpy as np
 
 from etobs.compile.functions import FunctionSpec
+from etobs.estimation import _network_jumps
 from etobs.estimation.calls import model_specs
+from etobs.model.fates import LINK_WIDTH
 from etobs.model.functions import CONSTANT, CUSTOM, LINEAR, POWER, QUADRATIC
 from etobs.model.rules import DYNAMIC, GENERALIZED, PERIODIC, RELATIVE, STATIC, EngineForm
 from etobs.model.signals import CONSTANT as SIG_CONSTANT
@@ -78,6 +83,8 @@ class ModelSource:
         How messages name each of them (``"f_p"``, ``"gamma of node 0"``, ...).
     specs : dict
         How each of them is called (:class:`~etobs.compile.functions.FunctionSpec`).
+    helpers : dict
+        etobs' own scalar functions the text calls (the network's), by global name.
     numbers : list of ndarray
         The blocks of the parameter vector, in order.
     n_work : int
@@ -87,6 +94,7 @@ class ModelSource:
 
     text: str = ""
     users: dict[str, Callable[..., Any]] = field(default_factory=dict)
+    helpers: dict[str, Callable[..., Any]] = field(default_factory=dict)
     names: dict[str, str] = field(default_factory=dict)
     specs: dict[str, FunctionSpec] = field(default_factory=dict)
     numbers: list[np.ndarray] = field(default_factory=list)
@@ -119,14 +127,26 @@ class ModelSource:
 
 @dataclass(frozen=True)
 class _Node:
-    """What the generated code needs of one node."""
+    """What the generated code needs of one node (an output node or an input node).
+
+    Per component: ``sq`` the index in ``q`` of the value the node last sent, ``sw`` the
+    index in ``work`` of the value it would send now (``ytilde_i``, ``ytilde_i - yhat_i``
+    with the observer-copy hold, or ``u_k``), ``mw`` that of the current measurement
+    its rule may read (``ytilde_i`` or ``u_k``).
+    """
 
     index: int
     form: EngineForm
-    outputs: tuple[int, ...]
-    s0: int  # index of its rule state in q
+    sq: tuple[int, ...]
+    sw: tuple[int, ...]
+    mw: tuple[int, ...]
+    s0: int  # index of its rule state in q (-1: none)
     p0: int  # offset of its numbers in p
     kforms: tuple[tuple[int, str | None] | None, ...]  # per slot: (kind, user global or None)
+
+    @property
+    def size(self) -> int:
+        return len(self.sq)
 
 
 @dataclass(frozen=True)
@@ -146,7 +166,7 @@ class _Group:
         return self.nodes[0]
 
     def tables(self) -> list[str]:
-        """The group's constant tables: node index, rule-state index, numbers offset, outputs."""
+        """The group's constant tables: node index, rule-state index, numbers offset, components."""
         g = self.index
         rows = {
             "I": [nd.index for nd in self.nodes],
@@ -154,25 +174,35 @@ class _Group:
             "P": [nd.p0 for nd in self.nodes],
         }
         out = [f"G{g}{k} = np.array({v!r}, dtype=np.int64)" for k, v in rows.items()]
-        outs = [list(nd.outputs) for nd in self.nodes]
-        return [*out, f"G{g}O = np.array({outs!r}, dtype=np.int64)"]
+        for key in ("sq", "sw", "mw"):
+            cols = [list(getattr(nd, key)) for nd in self.nodes]
+            out.append(f"G{g}{key.upper()} = np.array({cols!r}, dtype=np.int64)")
+        return out
 
     def loop(self) -> list[str]:
-        """Loop header and the node's locals ``i, s0, r, o0, o1, ...``."""
+        """Loop header and the node's locals ``i, s0, r, a0, b0, m0, a1, ...``."""
         return [f"for jj in range({len(self.nodes)}):", *("    " + t for t in self.locals("jj"))]
 
     def locals(self, jj: str) -> list[str]:
-        """The locals of the node at position ``jj`` (an expression) of the group."""
+        """The locals of the node at position ``jj`` (an expression) of the group.
+
+        ``a{c}``: the index in ``q`` of component ``c``'s sent value; ``b{c}``: that in
+        ``work`` of the value it would send now; ``m{c}``: of the current measurement.
+        """
         g = self.index
         out = [f"i = G{g}I[{jj}]", f"s0 = G{g}S[{jj}]", f"r = G{g}P[{jj}]"]
-        return out + [f"o{c} = G{g}O[{jj}, {c}]" for c in range(len(self.first.outputs))]
+        for c in range(self.first.size):
+            out += [f"a{c} = G{g}SQ[{jj}, {c}]", f"b{c} = G{g}SW[{jj}, {c}]"]
+            if self.first.form.kind == RELATIVE:
+                out.append(f"m{c} = G{g}MW[{jj}, {c}]")
+        return out
 
 
 def _groups(nodes: list[_Node]) -> list[_Group]:
     """The nodes grouped by kind, in the order of their first node."""
     keyed: dict[tuple[Any, ...], list[_Node]] = {}
     for nd in nodes:
-        keyed.setdefault((nd.form.kind, nd.kforms, len(nd.outputs)), []).append(nd)
+        keyed.setdefault((nd.form.kind, nd.kforms, nd.size), []).append(nd)
     return [_Group(g, tuple(members)) for g, members in enumerate(keyed.values())]
 
 
@@ -187,17 +217,23 @@ class _Where:
     nv: int
     z0: int  # q[z0:z0 + nz] is z
     yb0: int  # q[yb0:yb0 + ny] is ybar
-    w: dict[str, int]  # offsets in work of u, v, xhat, yhat, ytilde, m
+    w: dict[str, int]  # offsets in work of u, v, xhat, yhat, ytilde, m, [ubar], [innov, ybar_o]
     pp: str | None  # the plant's params as an expression, or None
     po: str | None  # the observer's params
     psi: bool
     signals: tuple[tuple[int, int, int], ...]  # (kind, offset in p, dim) of u, v, m
+    held_u: tuple[tuple[int, int], ...]  # (input k, index in q of ubar_k) of the input nodes
+    innovation: bool  # Remark 3: nodes send ytilde_i - yhat_i
+    n_ch: int  # nodes of every kind
+    network: int  # offset in p of the network's numbers (-1: no network)
+    run: int  # index in q of the run's index (-1: no network)
 
 
 def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
-    """The model of ``problem`` (an :class:`EstimationProblem` of the base setting) as source.
+    """The model of ``problem`` (an :class:`EstimationProblem`) as source.
 
-    ``forms`` are the nodes' engine forms (:func:`etobs.model.rules.engine_form_of`).
+    ``forms`` are the engine forms of the nodes' rules, output nodes then input nodes
+    (:func:`etobs.model.rules.engine_form_of`).
     """
     pl, ob, lay = problem.plant, problem.observer, problem.layout
     src = ModelSource()
@@ -207,8 +243,21 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     npp, npo = pl.params.size, ob.params.size
     for name, (fn, spec, _) in model_specs(problem).items():
         src.user(fn, name.upper(), name, spec)  # globals F_P, H, F_O, PSI
-    # scratch: u, v, xhat, yhat, ytilde, m
-    offsets = np.cumsum([0, nu, nv, nx, ny, ny, ny]).tolist()
+    innovation = problem.hold == "innovation"
+    held_u = tuple(
+        (int(k), int(h))
+        for ch in lay.channels
+        if ch.kind == "u"
+        for k, h in zip(ch.index, ch.held, strict=True)
+    )
+    # scratch: u, v, xhat, yhat, ytilde, m, then the held input and the copy hold's signals
+    parts = [("u", nu), ("v", nv), ("xhat", nx), ("yhat", ny), ("ytilde", ny), ("m", ny)]
+    if held_u:
+        parts.append(("ubar", nu))
+    if innovation:
+        parts += [("innov", ny), ("ybar_o", ny)]
+    offsets = np.cumsum([0] + [n for _, n in parts]).tolist()
+    w = {name: int(off) for (name, _), off in zip(parts, offsets, strict=False)}
     src.n_work = offsets[-1]
     signals = []
     for name in ("u", "v", "m"):
@@ -218,9 +267,19 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
         if fn is not None:
             src.user(fn, f"SIG_{name.upper()}", f"signal {name}", FunctionSpec("t", (), sig.dim))
         signals.append((kind, off, sig.dim))
+    network = -1
+    if problem.network is not None:
+        seed = problem.network.seed
+        network = src.put([seed >> 32, seed & 0xFFFFFFFF])  # two exact halves
+        for ch in lay.channels:
+            assert ch.link is not None
+            src.put(ch.link.form())
+        for glob, fn in (("NET_SEND", _network_jumps.send), ("NET_DELIVER", _network_jumps.deliver)):
+            src.helpers[glob] = fn
+        src.helpers["NET_GAP"] = _network_jumps.arrival_gap
     nodes = [
-        _node(src, i, nd, form, lay.rule[i].start)
-        for i, (nd, form) in enumerate(zip(problem.nodes, forms, strict=True))
+        _node(src, c, ch, form, w, innovation)
+        for c, (ch, form) in enumerate(zip(lay.channels, forms, strict=True))
     ]
     at = _Where(
         nx,
@@ -230,11 +289,16 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
         nv,
         lay.z.start,
         lay.ybar.start,
-        dict(zip(("u", "v", "xhat", "yhat", "ytilde", "m"), offsets[:-1], strict=True)),
+        w,
         f"p[{tp}:{tp + npp}]" if npp else None,
         f"p[{to}:{to + npo}]" if npo else None,
         ob.psi is not None,
         tuple(signals),
+        held_u,
+        innovation,
+        len(nodes),
+        network,
+        -1 if lay.run is None else lay.run,
     )
     groups = _groups(nodes)
     c = _Code()
@@ -245,9 +309,11 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     jp = [next(grp.nodes.index(nd) for grp in groups if nd in grp.nodes) for nd in nodes]
     c.line(f"JG = np.array({jg!r}, dtype=np.int64)")
     c.line(f"JP = np.array({jp!r}, dtype=np.int64)")
+    if network >= 0:
+        c.lines(_network_tables(lay.channels, network))
     c.line("")
     # one C function (:func:`etobs.compile.functions.c_signature`), compiled once: the
-    # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of node
+    # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of rule
     # k >= 0, and gives each run a scratch array of n_work + 1 floats
     c.line("def est(k, t, qp, cfp, wp, a3, iap, pp, outp):")
     c.indent()
@@ -257,12 +323,12 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("if k == -1:")
     c.indent()
     c.line(f"dq = carray(outp, ({lay.n},))")
-    _flow(c, at, groups)
+    _flow(c, at, groups, lay.n_flow or lay.n)
     c.line("return 1")
     c.dedent()
     c.line("if k == -2:")
     c.indent()
-    c.line(f"g = carray(outp, ({len(nodes)},))")
+    c.line(f"g = carray(outp, ({len(nodes) * (2 if network >= 0 else 1)},))")
     _guard(c, at, groups)
     c.line("return 1")
     c.dedent()
@@ -273,8 +339,27 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     return src
 
 
-def _node(src: ModelSource, i: int, nd: Any, form: EngineForm, s0: int) -> _Node:
-    """Node ``i``'s numbers into ``p`` and its user K-functions into ``src``."""
+def _network_tables(channels: Any, network: int) -> list[str]:
+    """Per node: its network block (``NM``), size, capacity, link numbers in ``p``, sent and held."""
+    width = max(ch.size for ch in channels)
+
+    def pad(idx: Any) -> list[int]:
+        return [int(a) for a in idx] + [0] * (width - len(idx))
+
+    rows = {
+        "NM": [ch.net.start for ch in channels],
+        "NN": [ch.size for ch in channels],
+        "NC": [ch.link.capacity for ch in channels],
+        "NP": [network + 2 + LINK_WIDTH * c for c in range(len(channels))],
+    }
+    out = [f"{k} = np.array({v!r}, dtype=np.int64)" for k, v in rows.items()]
+    out.append(f"NS = np.array({[pad(ch.sent) for ch in channels]!r}, dtype=np.int64)")
+    out.append(f"NH = np.array({[pad(ch.held) for ch in channels]!r}, dtype=np.int64)")
+    return out
+
+
+def _node(src: ModelSource, c: int, ch: Any, form: EngineForm, w: dict[str, int], innovation: bool) -> _Node:
+    """Node ``c``'s numbers into ``p`` and its user K-functions into ``src``."""
     numbers = np.zeros(RULE_W)
     for key, val in form.numbers.items():
         numbers[RULE_NUMBERS.index(key)] = val
@@ -290,18 +375,39 @@ def _node(src: ModelSource, i: int, nd: Any, form: EngineForm, s0: int) -> _Node
         numbers[P_F + 2 * slot : P_F + 2 * slot + 2] = k1, k2
         glob = None
         if user is not None:
-            glob = src.user(user, f"K{i}_{slot}", f"{KSLOTS[slot]} of node {i}", FunctionSpec("t", (), 0))
+            glob = src.user(user, f"K{c}_{slot}", f"{KSLOTS[slot]} of node {c}", FunctionSpec("t", (), 0))
         kforms.append((kind, glob))
-    return _Node(i, form, tuple(int(k) for k in nd.outputs), s0, src.put(numbers), tuple(kforms))
+    index = [int(k) for k in ch.index]
+    if ch.kind == "u":  # an input node sends u_k (section 7.3)
+        sw = mw = tuple(w["u"] + k for k in index)
+    else:
+        mw = tuple(w["ytilde"] + k for k in index)
+        sw = tuple(w["innov"] + k for k in index) if innovation else mw
+    s0 = ch.rule_state.start if ch.rule_state.stop > ch.rule_state.start else -1
+    sq = tuple(int(a) for a in ch.sent)
+    return _Node(c, form, sq, sw, mw, s0, src.put(numbers), tuple(kforms))
 
 
-def _flow(c: _Code, at: _Where, groups: list[_Group]) -> None:
-    """``dq = q'`` (eq. (2), (7), (14), (44))."""
-    w, nx, nz, ny, nu, nv = at.w, at.nx, at.nz, at.ny, at.nu, at.nv
-    c.lines(_signal(0, at.signals[0], w["u"]))
-    c.lines(_signal(1, at.signals[1], w["v"]))
-    u = f"work[{w['u']}:{w['u'] + nu}]"
-    c.call("F_P", f"t, q[0:{nx}], {u}, work[{w['v']}:{w['v'] + nv}]", at.pp, f"dq[0:{nx}]", nx, S_FP)  # (2)
+def _prelude(c: _Code, at: _Where, flow: bool) -> None:
+    """The signals the nodes read, into ``work``.
+
+    ``u`` (for input nodes), ``ytilde``, and with the observer-copy hold ``yhat`` and
+    ``ytilde - yhat``; the flow has computed ``u`` and ``yhat`` already.
+    """
+    w, ny = at.w, at.ny
+    if at.held_u and not flow:
+        c.lines(_signal(0, at.signals[0], w["u"]))
+    c.lines(_ytilde(at))
+    if at.innovation:
+        if not flow:
+            _estimate(c, at)
+        c.line(f"for ii in range({ny}):")
+        c.line(f"    work[{w['innov']} + ii] = work[{w['ytilde']} + ii] - work[{w['yhat']} + ii]")
+
+
+def _estimate(c: _Code, at: _Where) -> None:
+    """``xhat = psi(z)`` and ``yhat = h(xhat)`` into the scratch."""
+    w, nx, nz, ny = at.w, at.nx, at.nz, at.ny
     z = f"q[{at.z0}:{at.z0 + nz}]"
     xhat, yhat = f"work[{w['xhat']}:{w['xhat'] + nx}]", f"work[{w['yhat']}:{w['yhat'] + ny}]"
     if at.psi:
@@ -310,11 +416,35 @@ def _flow(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.line(f"for ii in range({nx}):")
         c.line(f"    work[{w['xhat']} + ii] = q[{at.z0} + ii]")
     c.call("H", xhat, at.pp, yhat, ny, S_H)
+
+
+def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
+    """``dq = q'`` (eq. (2), (7), (14), (44), (50), (52)) in the entries below ``n_flow``."""
+    w, nx, nz, ny, nu, nv = at.w, at.nx, at.nz, at.ny, at.nu, at.nv
+    c.lines(_signal(0, at.signals[0], w["u"]))
+    c.lines(_signal(1, at.signals[1], w["v"]))
+    u = f"work[{w['u']}:{w['u'] + nu}]"
+    c.call("F_P", f"t, q[0:{nx}], {u}, work[{w['v']}:{w['v'] + nv}]", at.pp, f"dq[0:{nx}]", nx, S_FP)  # (2)
+    _estimate(c, at)
+    z = f"q[{at.z0}:{at.z0 + nz}]"
+    yhat = f"work[{w['yhat']}:{w['yhat'] + ny}]"
+    ubar = u
+    if at.held_u:  # eq. (50): the observer runs on the held input
+        ubar = f"work[{w['ubar']}:{w['ubar'] + nu}]"
+        c.line(f"for ii in range({nu}):")
+        c.line(f"    work[{w['ubar']} + ii] = work[{w['u']} + ii]")
+        for k, h in at.held_u:
+            c.line(f"work[{w['ubar'] + k}] = q[{h}]")
     ybar = f"q[{at.yb0}:{at.yb0 + ny}]"
-    c.call("F_O", f"t, {z}, {u}, {ybar}, {yhat}", at.po, f"dq[{at.z0}:{at.z0 + nz}]", nz, S_FO)  # eq. (7)
-    c.line(f"for ii in range({ny}):")
-    c.line(f"    dq[{at.yb0} + ii] = 0.0")
-    c.lines(_ytilde(at))
+    if at.innovation:  # Remark 3: the observer holds ytilde - yhat as sent
+        ybar = f"work[{w['ybar_o']}:{w['ybar_o'] + ny}]"
+        c.line(f"for ii in range({ny}):")
+        c.line(f"    work[{w['ybar_o']} + ii] = work[{w['yhat']} + ii] + q[{at.yb0} + ii]")
+    c.call("F_O", f"t, {z}, {ubar}, {ybar}, {yhat}", at.po, f"dq[{at.z0}:{at.z0 + nz}]", nz, S_FO)  # eq. (7)
+    first_held = at.yb0
+    c.line(f"for ii in range({first_held}, {n_flow}):")
+    c.line("    dq[ii] = 0.0  # held values and rule states; the rules' flows follow")
+    _prelude(c, at, flow=True)
     for grp in groups:
         kind = grp.first.form.kind
         if kind not in (DYNAMIC, GENERALIZED, PERIODIC):
@@ -325,7 +455,7 @@ def _flow(c: _Code, at: _Where, groups: list[_Group]) -> None:
             c.line("dq[s0] = 1.0")
         else:
             # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
-            c.line(f"e = {_norm(grp, at, False)}")
+            c.line(f"e = {_norm(grp, False)}")
             c.lines(_kcall(grp, A, "q[s0]", "av"))
             if kind == DYNAMIC:
                 c.lines(_kcall(grp, G, "e", "gv"))
@@ -337,50 +467,77 @@ def _flow(c: _Code, at: _Where, groups: list[_Group]) -> None:
 
 
 def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
-    """Every node's trigger function (eq. (15), (45)): the node sends when ``g_i >= 0``."""
-    c.lines(_ytilde(at))
+    """Every node's trigger function (eq. (15), (45), (53)): the node sends when ``g_i >= 0``.
+
+    With a network the deliveries come first: ``g[c]`` is zero when a packet of node
+    ``c`` arrives, and the nodes' triggers follow (:mod:`etobs.estimation.assembly`).
+    """
+    _prelude(c, at, flow=False)
+    off = 0
+    if at.network >= 0:
+        off = at.n_ch
+        c.line(f"for cc in range({at.n_ch}):")
+        c.line("    g[cc] = NET_GAP(q, t, NM[cc], NN[cc], NC[cc])")
     for grp in groups:
         kind = grp.first.form.kind
         c.lines(grp.loop())
         c.indent()
+        gi = f"g[{off} + i]" if off else "g[i]"
         if kind == PERIODIC:
-            c.line(f"g[i] = q[s0] - p[r + {P_PERIOD}]")
+            c.line(f"{gi} = q[s0] - p[r + {P_PERIOD}]")
         elif kind == RELATIVE:
-            c.line(f"e = {_norm(grp, at, False)}")
-            c.line(f"g[i] = e - p[r + {P_RHO}] * {_norm(grp, at, True)} - p[r + {P_EPS}]")
+            c.line(f"e = {_norm(grp, False)}")
+            c.line(f"{gi} = e - p[r + {P_RHO}] * {_norm(grp, True)} - p[r + {P_EPS}]")
         else:
-            c.line(f"e = {_norm(grp, at, False)}")
+            c.line(f"e = {_norm(grp, False)}")
             c.lines(_kcall(grp, G, "e", "gv"))
             if kind == STATIC:
-                c.line(f"g[i] = gv - p[r + {P_EPS}]")
+                c.line(f"{gi} = gv - p[r + {P_EPS}]")
             elif kind == DYNAMIC:
                 # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
                 c.lines(_kcall(grp, A, "q[s0]", "av"))
-                c.line(f"g[i] = gv - p[r + {P_SIGMA}] * av - p[r + {P_EPS}]")
+                c.line(f"{gi} = gv - p[r + {P_SIGMA}] * av - p[r + {P_EPS}]")
             else:
-                # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
+                # eq. (45), read with >= (see GeneralizedRule):
+                # gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
                 c.lines(_kcall(grp, D, "q[s0]", "w"))
                 c.lines(_kcall(grp, GC, "e", "gc"))
                 c.lines(_kcall(grp, A, "q[s0]", "ac"))
-                c.line(f"g[i] = gv + w * gc - p[r + {P_SIGMA}] * w * ac - p[r + {P_EPS}]")
+                c.line(f"{gi} = gv + w * gc - p[r + {P_SIGMA}] * w * ac - p[r + {P_EPS}]")
         c.dedent()
 
 
 def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
-    """Node ``k`` sends ``ytilde_k`` (eq. (22): ``e_k+ = 0``) and resets its own rule state."""
-    c.lines(_ytilde(at))
+    """Node ``k`` sends its current value (eq. (22): ``e_k+ = 0``) and resets its own rule state.
+
+    With a network, rules ``0 .. C-1`` deliver node ``k``'s earliest packet, and rule
+    ``C + c`` is node ``c``'s transmission, whose packet then enters its link.
+    """
+    if at.network >= 0:
+        c.line(f"if k < {at.n_ch}:")
+        c.line("    NET_DELIVER(q, NM[k], NH[k], NN[k], NC[k])")
+        c.line("    return 1")
+        c.line(f"k = k - {at.n_ch}")
+    _prelude(c, at, flow=False)
     c.line("gk = JG[k]")
     for grp in groups:
         c.line(f"{'if' if grp.index == 0 else 'elif'} gk == {grp.index}:")
         c.indent()
         c.lines(grp.locals("JP[k]"))
-        for o in range(len(grp.first.outputs)):
-            c.line(f"q[{at.yb0} + o{o}] = work[{at.w['ytilde']} + o{o}]")
+        for o in range(grp.first.size):
+            c.line(f"q[a{o}] = work[b{o}]")
         if grp.first.form.kind in (DYNAMIC, GENERALIZED):
             c.line(f"q[s0] = p[r + {P_B}] * q[s0]  # eta+ = b eta")
         elif grp.first.form.kind == PERIODIC:
             c.line("q[s0] = 0.0")
         c.dedent()
+    if at.network >= 0:
+        n = at.network
+        c.line(f"seed = int(p[{n}]) * 4294967296 + int(p[{n + 1}])")
+        c.line(
+            f"NET_SEND(q, t, seed, int(q[{at.run}]), k, NM[k], NS[k], NH[k], NN[k], NC[k], "
+            f"p[NP[k]:NP[k] + {LINK_WIDTH}])"
+        )
 
 
 class _Code:
@@ -449,12 +606,11 @@ def _ytilde(at: _Where) -> list[str]:
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
 
 
-def _norm(grp: _Group, at: _Where, relative: bool) -> str:
-    """``|e_i| = |ybar_i - ytilde_i|``, or ``|ytilde_i|`` when ``relative``, as an expression."""
-    wy = at.w["ytilde"]
+def _norm(grp: _Group, relative: bool) -> str:
+    """``|e_i| = |sent - current|``, or ``|current measurement|`` when ``relative``, as an expression."""
     terms = []
-    for o in range(len(grp.first.outputs)):
-        d = f"work[{wy} + o{o}]" if relative else f"(q[{at.yb0} + o{o}] - work[{wy} + o{o}])"
+    for o in range(grp.first.size):
+        d = f"work[m{o}]" if relative else f"(q[a{o}] - work[b{o}])"
         terms.append(f"{d} * {d}")
     return f"np.sqrt({' + '.join(terms)})"
 

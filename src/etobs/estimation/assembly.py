@@ -192,9 +192,7 @@ class _Assembly:
         return qn
 
     def system(self) -> BatchedSystem:
-        names = tuple(ch.name for ch in self.channels)
-        if self.networked:
-            names = tuple(f"deliver {n}" for n in names) + names
+        names = self.pb.rule_names
         jump: Callable[[int, np.ndarray, np.ndarray], np.ndarray] = self.jump
         return BatchedSystem(
             n=self.lay.n,

@@ -10,10 +10,12 @@ functions' fingerprints; the problem's numbers (the plant's and observer's ``par
 signal amplitudes, rule parameters) travel in the run's parameter vector, so problems
 that differ only in numbers share the compiled model.
 
-The engine models the paper's base setting with every built-in rule (dynamic, static
-and send-on-delta, periodic, relative, generalized), any K-function and any signal.
-:func:`engine_support` says why a problem is not covered (input nodes, the observer-copy
-hold or a network, until they move to the engine; or a rule of the user's own).
+The engine models every problem etobs builds: every built-in rule (dynamic, static and
+send-on-delta, periodic, relative, generalized), any K-function and signal, measurement
+noise, input nodes (section 7.3), the observer-copy hold (Remark 3) and networks (delay,
+loss, reordering, capacity; each packet's fate drawn as :mod:`etobs.model.fates` says, so
+the engine and the reference draw the same). :func:`engine_support` says why a problem is
+not covered: a rule of the user's own.
 """
 
 from __future__ import annotations
@@ -47,19 +49,12 @@ class CompiledProblem:
 def engine_support(problem: EstimationProblem) -> str:
     """Why the engine cannot run ``problem`` (``""`` when it can)."""
     used = [
-        what
-        for what, on in (
-            ("input nodes (section 7.3)", bool(problem.input_nodes)),
-            (f"hold={problem.hold!r} (Remark 3)", problem.hold != "output"),
-            ("a network (delay, loss)", problem.network is not None),
-        )
-        if on
+        f"node {ch.name!r}'s rule {type(ch.rule).__name__} (a rule of your own)"
+        for ch in problem.layout.channels
+        if engine_form_of(ch.rule) is None
     ]
-    for i, nd in enumerate(problem.nodes):
-        if engine_form_of(nd.rule) is None:
-            used.append(f"node {i}'s rule {type(nd.rule).__name__} (a rule of your own)")
     if used:
-        return "the engine models the base setting with etobs' rules; this problem uses " + ", ".join(used)
+        return "the engine runs etobs' rules; this problem uses " + ", ".join(used)
     return ""
 
 
@@ -80,23 +75,26 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     why = engine_support(problem)
     if why:
         raise InputError(f"backend='engine': {why}; use backend='numpy' or 'scipy'")
-    forms = [engine_form_of(nd.rule) for nd in problem.nodes]
+    lay = problem.layout
+    forms = [engine_form_of(ch.rule) for ch in lay.channels]
     src = ms.model_source(problem, forms)  # type: ignore[arg-type] - engine_support checked them
     try:
-        fns = compile_module(src.text, src.users, ("est",), "estimation model")
+        fns = compile_module(src.text, {**src.users, **src.helpers}, ("est",), "estimation model")
     except ModelError:
         # name the user function at fault: each compiled on its own raises a ModelError naming it
         for glob, fn in src.users.items():
             compile_function(fn, src.specs[glob], src.names[glob])
         raise
     params = np.concatenate(src.numbers) if src.numbers else np.zeros(0)
+    names = problem.rule_names
     system = CompiledSystem(
-        n=problem.layout.n,
-        n_rules=problem.n_nodes,
+        n=lay.n,
+        n_rules=len(names),
         addresses=(fns[0].address,) * 3,  # one function for flow, guard and jump
         n_params=params.size,
         n_work=src.n_work,
-        rule_names=tuple(nd.name or f"node{i}" for i, nd in enumerate(problem.nodes)),
+        n_flow=lay.n_flow,
+        rule_names=names,
         function_names=ms.FUNCTIONS,
         keep=fns,
     )

@@ -159,6 +159,18 @@ class EstimationProblem:
         return tuple(ch.name for ch in self.layout.channels)
 
     @property
+    def rule_names(self) -> tuple[str, ...]:
+        """Names of the hybrid model's jump rules.
+
+        The nodes' transmissions; with a network, after one delivery rule per node
+        (``"deliver <node>"``).
+        """
+        names = self.channel_names
+        if self.network is not None:
+            names = tuple(f"deliver {n}" for n in names) + names
+        return names
+
+    @property
     def extended(self) -> bool:
         """Whether the problem goes beyond the base setting (input nodes, copy hold, a network)."""
         return bool(self.input_nodes) or self.hold != "output" or self.network is not None

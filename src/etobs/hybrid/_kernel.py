@@ -61,7 +61,7 @@ EPS = np.finfo(np.float64).eps
 
 # Indices into the float and integer option vectors.
 F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
-I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK = 0, 1, 2, 3, 4
+I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW = 0, 1, 2, 3, 4, 5
 #: Slots of the system's functions in failure codes.
 FLOW, GUARD, JUMP = 1, 2, 3
 #: The ``k`` that flow and guard are called with (a jump gets its rule, >= 0), so that

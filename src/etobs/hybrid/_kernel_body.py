@@ -22,6 +22,7 @@ from etobs.hybrid._kernel import (
     I_KEEP_STEPS,
     I_MAX_JUMPS,
     I_MAX_STEPS,
+    I_N_FLOW,
     I_N_WORK,
     I_SAMPLES,
     MAX_FACTOR,
@@ -173,6 +174,9 @@ def _solve_one(
     dop853 = DOP853
     keep_steps = iopt[I_KEEP_STEPS] != 0
     n = x_init.shape[0]
+    # entries nf .. n-1 are constant along flows (a network's packets): they are left out
+    # of the stages, the error norm and the dense output, and the flow need not write them
+    nf = iopt[I_N_FLOW]
     s = N_STAGES  # stages without the FSAL one
     n_extra = N_EXTRA
     nq = NQ
@@ -193,7 +197,7 @@ def _solve_one(
     x = vector_at(base, o, n)
     x_new = vector_at(base, o + n, n)
     y = vector_at(base, o + 2 * n, n)
-    dy = vector_at(base, o + 3 * n, n)
+    dy = vector_at(base, o + 3 * n, nf)
     xs = vector_at(base, o + 4 * n, n)
     f = vector_at(base, o + 5 * n, n)
     o += 6 * n
@@ -207,6 +211,10 @@ def _solve_one(
     gs = rows_at(base, o, n_s + 2, m)
     o += (n_s + 2) * m
     p = vector_at(base, o, p_run.shape[0])
+    # zeros: the flow and the dense output leave the entries nf.. of their rows unwritten
+    everything = vector_at(base, 0, o)
+    for i in range(o):
+        everything[i] = 0.0
     for i in range(n):
         x[i] = x_init[i]
     for i in range(p_run.shape[0]):
@@ -241,7 +249,7 @@ def _solve_one(
         if first_step > 0.0:
             h = first_step
         else:
-            h = _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, xs)
+            h = _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, xs, nf)
             if failed(args):
                 st = MODEL_ERROR
 
@@ -252,41 +260,44 @@ def _solve_one(
         last = hh >= remaining
         for i in range(n):
             K[0, i] = f[i]
+        for q in range(nf, n):  # the stages' constant entries (a jump may have changed them)
+            y[q] = x[q]
+            x_new[q] = x[q]
         # stages 1..s-1, then the new state and its derivative (FSAL) at stage s;
         # one call site, because ``flow`` is inlined
         for i in range(1, s + 1):
             if i < s:
-                _comb(TA[i], K, i, dy)
+                _comb(TA[i], K, i, dy, nf)
                 ti = t + TC[i] * hh
                 yi = y
             else:
-                _comb(TB, K, s, dy)
+                _comb(TB, K, s, dy, nf)
                 ti = t + hh
                 yi = x_new
-            for q in range(n):
+            for q in range(nf):
                 yi[q] = x[q] + hh * dy[q]
             flow(ti, yi, p, args, kp + 8 * n * i)
         # error norm (see Tableau.error_norm)
-        _comb(TE, K, s + 1, dy)
+        _comb(TE, K, s + 1, dy, nf)
         e5 = 0.0
-        for q in range(n):
+        for q in range(nf):
             sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
             dy[q] = dy[q] / sc
             e5 += dy[q] * dy[q]
         if dop853:
-            _comb(TE3, K, s + 1, y)
+            _comb(TE3, K, s + 1, y, nf)
             e3 = 0.0
-            for q in range(n):
+            for q in range(nf):
                 sc = atol + rtol * max(abs(x[q]), abs(x_new[q]))
                 v3 = y[q] / sc
                 e3 += v3 * v3
             denom = e5 + 0.01 * e3
-            err = 0.0 if denom == 0.0 else abs(hh) * e5 / np.sqrt(denom * n)
+            err = 0.0 if denom == 0.0 else abs(hh) * e5 / np.sqrt(denom * nf)
         else:
-            err = abs(hh) * np.sqrt(e5 / n)
+            err = abs(hh) * np.sqrt(e5 / nf)
         # a failed call leaves its output unwritten: the step must not be taken (the run
         # then ends with model_error at its last good state)
-        finite = np.isfinite(err) and _all_finite(x_new) and _row_finite(K, s) and not failed(args)
+        finite = np.isfinite(err) and _all_finite(x_new) and _row_finite(K, s, nf) and not failed(args)
         accept = finite and err <= 1.0
         if err == 0.0:
             factor = MAX_FACTOR
@@ -412,9 +423,9 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
 
 
 @jit
-def _row_finite(K, r):
-    """Whether row ``r`` of ``K`` is finite (read in place: a view would be reference counted)."""
-    for i in range(K.shape[1]):
+def _row_finite(K, r, nf):
+    """Whether row ``r`` of ``K`` is finite in its first ``nf`` entries (read in place)."""
+    for i in range(nf):
         if not np.isfinite(K[r, i]):
             return False
     return True
@@ -431,18 +442,18 @@ def _record_arc(buffers, slot, arc_cap, narc, t, j, x):
 
 
 @jit
-def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
-    """Hairer, Nørsett & Wanner (1993), II.4 (as ``_FastSolver._initial_step``)."""
+def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1, nf):
+    """Hairer, Nørsett & Wanner (1993), II.4, with norms over the first ``nf`` entries."""
     n = x.shape[0]
     remaining = t_end - t
     d0 = 0.0
     d1 = 0.0
-    for q in range(n):
+    for q in range(nf):
         sc = atol + rtol * abs(x[q])
         d0 += (x[q] / sc) ** 2
         d1 += (f[q] / sc) ** 2
-    d0 = np.sqrt(d0 / n)
-    d1 = np.sqrt(d1 / n)
+    d0 = np.sqrt(d0 / nf)
+    d1 = np.sqrt(d1 / nf)
     if d0 < 1e-5 or d1 < 1e-5:
         h0 = 1e-6
     else:
@@ -452,10 +463,10 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
         y[q] = x[q] + h0 * f[q]
     flow_call(t + h0, y, p, args, f1)
     d2 = 0.0
-    for q in range(n):
+    for q in range(nf):
         sc = atol + rtol * abs(x[q])
         d2 += ((f1[q] - f[q]) / sc) ** 2
-    d2 = np.sqrt(d2 / n) / h0
+    d2 = np.sqrt(d2 / nf) / h0
     big = max(d1, d2)
     if big <= 1e-15:
         h1 = max(1e-6, h0 * 1e-3)
@@ -469,29 +480,30 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1):
 
 @jit
 def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
-    """Coefficients of the continuous extension (see ``Tableau.dense``)."""
+    """Coefficients of the continuous extension (``Tableau.dense``) of the first ``len(dy)`` entries."""
     n = x.shape[0]
+    nf = dy.shape[0]
     if not DOP853:
         # Dormand--Prince 5(4): Q[k] = h * sum_i P[i, k] K[i]
         for k in range(NQ):
-            _comb(TDD[k], K, N_STAGES + 1, dy)
-            for q in range(n):
+            _comb(TDD[k], K, N_STAGES + 1, dy, nf)
+            for q in range(nf):
                 Q[k, q] = h * dy[q]
         return
     for r in range(N_EXTRA):
         mm = N_STAGES + 1 + r
-        _comb(TDA[r], K, mm, dy)
-        for q in range(n):
+        _comb(TDA[r], K, mm, dy, nf)
+        for q in range(nf):
             y[q] = x[q] + h * dy[q]
         flow(t + TDC[r] * h, y, p, args, address(K) + 8 * n * mm)
-    for q in range(n):
+    for q in range(nf):
         d = x_new[q] - x[q]
         Q[0, q] = d
         Q[1, q] = h * K[0, q] - d
         Q[2, q] = 2.0 * d - h * (K[N_STAGES, q] + K[0, q])
     for r in range(NQ - 3):
-        _comb(TDD[r], K, N_STAGES + 1 + N_EXTRA, dy)
-        for q in range(n):
+        _comb(TDD[r], K, N_STAGES + 1 + N_EXTRA, dy, nf)
+        for q in range(nf):
             Q[3 + r, q] = h * dy[q]
 
 
@@ -588,9 +600,8 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
 
 
 @jit
-def _comb(w, K, nstage, out):
-    """``out = sum_k w[k] K[k]`` over the first ``nstage`` stages, zero weights skipped."""
-    n = out.shape[0]
+def _comb(w, K, nstage, out, n):
+    """``out[:n] = sum_k w[k] K[k, :n]`` over the first ``nstage`` stages, zero weights skipped."""
     for i in range(n):
         out[i] = 0.0
     for k in range(nstage):

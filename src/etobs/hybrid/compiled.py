@@ -27,6 +27,7 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.solution import HybridArc, HybridSolution, JumpLog, SavedGrid
+from etobs.hybrid.system import _check_sizes
 
 #: Jump-log entries kept per run on the first pass (runs with more are solved again
 #: with room for all of them); bounded so that a big batch stays small in memory.
@@ -55,6 +56,10 @@ class CompiledSystem:
         Length of each run's parameter vector ``p``.
     n_work : int
         Length of each run's scratch array.
+    n_flow : int, optional
+        When given, only the entries ``0 .. n_flow-1`` change along flows: the others are
+        left out of the integration and its error control, and the flow need not write
+        them (as :class:`~etobs.hybrid.HybridSystem`'s ``n_flow``).
     rule_names : tuple of str, optional
     function_names : tuple of str
         Names of the functions by failure slot (slot ``s`` is ``function_names[s - 1]``),
@@ -71,13 +76,13 @@ class CompiledSystem:
     cf: np.ndarray = field(default_factory=lambda: np.zeros(1))
     n_params: int = 0
     n_work: int = 0
+    n_flow: int | None = None
     rule_names: tuple[str, ...] = ()
     function_names: tuple[str, ...] = ("flow", "guard", "jump")
     keep: Any = None
 
     def __post_init__(self) -> None:
-        v.integer("n", self.n, lower=1)
-        v.integer("n_rules", self.n_rules, lower=0)
+        _check_sizes(self.n, self.n_rules, self.n_flow)
         v.integer("n_params", self.n_params, lower=0)
         v.integer("n_work", self.n_work, lower=0)
         object.__setattr__(self, "ia", np.ascontiguousarray(np.r_[self.ia, 0], dtype=np.int64))
@@ -291,7 +296,14 @@ def _call(
         [opts.rtol, opts.atol, opts.max_step, opts.first_step or 0.0, opts.event_xtol], dtype=float
     )
     iopt = np.array(
-        [opts.max_jumps, opts.max_steps, opts.event_samples, int(keep_steps), system.n_work + 1],
+        [
+            opts.max_jumps,
+            opts.max_steps,
+            opts.event_samples,
+            int(keep_steps),
+            system.n_work + 1,
+            system.n if system.n_flow is None else system.n_flow,
+        ],
         dtype=np.int64,
     )
     R = runs.shape[0]  # buffer row r belongs to run runs[r]
