@@ -8,7 +8,7 @@ run measured in this process (``backend="engine"`` unless ``--backend`` says oth
 
     python benchmarks/bench_accuracy.py                 # 20 runs per cell, rtol 1e-10 and 1e-9
     python benchmarks/bench_accuracy.py --runs 100 --rtol 1e-10 1e-9 1e-8
-    python benchmarks/bench_accuracy.py --backend numpy # the batched numpy solver
+    python benchmarks/bench_accuracy.py --backend scipy # the solve_ivp reference (slow)
     python benchmarks/bench_accuracy.py --quick         # CI smoke: 2 rows, 3 runs, 5 s
 """
 
@@ -24,8 +24,6 @@ from etobs.estimation import transmission_counts
 from etobs.experiments.systems import build_problem
 from etobs.experiments.table1 import table1_spec
 
-ALIASES = {"numba": "engine", "fast": "numpy"}
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -37,10 +35,9 @@ def main() -> None:
     )
     parser.add_argument(
         "--backend",
-        type=lambda s: ALIASES.get(s, s),
-        choices=("auto", "engine", "numpy", "scipy"),
+        choices=("auto", "engine", "scipy"),
         default="engine",
-        help="solver (default engine; the earlier names numba and fast are accepted)",
+        help="solver (default engine)",
     )
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
     args = parser.parse_args()

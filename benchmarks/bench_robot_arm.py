@@ -1,15 +1,14 @@
-"""Benchmark: robot-arm runs with the engine and the numpy solver against the scipy backend.
+"""Benchmark: robot-arm runs with the engine against the scipy backend.
 
-The three backends of ``simulate`` run the paper's robot arm (section 7), written once
+The two backends of ``simulate`` run the paper's robot arm (section 8), written once
 for one run (``etobs.examples.robot_arm``), from the same random initial states:
-``backend="engine"`` (compiled, one run per thread), ``"numpy"`` (the batched numpy
-solver on the compiled model functions) and ``"scipy"`` (``solve_ivp``, the Python
-functions as written). The figures that matter are the per-run time ratios, measured in
-one process on the same runs (these machines are shared and noisy, so absolute times
-vary).
+``backend="engine"`` (compiled, one run per thread) and ``"scipy"`` (``solve_ivp``, the
+Python functions as written). The figures that matter are the per-run time ratio,
+measured in one process on the same runs (these machines are shared and noisy, so
+absolute times vary).
 
-    python benchmarks/bench_robot_arm.py            # 100 engine/numpy runs, 3 scipy runs, 30 s
-    python benchmarks/bench_robot_arm.py --quick    # CI smoke: 10 engine/numpy runs, 1 scipy, 5 s
+    python benchmarks/bench_robot_arm.py            # 100 engine runs, 3 scipy runs, 30 s
+    python benchmarks/bench_robot_arm.py --quick    # CI smoke: 10 engine runs, 1 scipy, 5 s
 
 Each backend's first solve in the process (compile, or load from the disk cache) is
 timed apart from the measured runs; without ``--quick`` the engine's first solve is also
@@ -27,7 +26,7 @@ from etobs import SaveAt, SolverOptions, simulate
 from etobs.estimation import transmission_counts
 from etobs.examples import random_initial_states, robot_arm
 
-BACKENDS = ("engine", "numpy", "scipy")
+BACKENDS = ("engine", "scipy")
 
 
 def timed(fn):
@@ -45,7 +44,7 @@ def agreement(a, b) -> tuple[bool, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
-    parser.add_argument("--runs", type=int, default=None, help="engine and numpy runs (default 100)")
+    parser.add_argument("--runs", type=int, default=None, help="engine runs (default 100)")
     parser.add_argument("--ref-runs", type=int, default=None, help="scipy-backend runs (default 3)")
     parser.add_argument("--t-end", type=float, default=None, help="horizon (default 30 s)")
     args = parser.parse_args()
@@ -62,7 +61,7 @@ def main() -> None:
         return simulate(pb, x, horizon, options=opts, save=save, backend=backend)
 
     print(f"robot arm, horizon {t_end:g} s, rtol = atol = {opts.rtol:g}, {_threads()} engine threads")
-    first = {b: timed(lambda b=b: run(b, x0[:1], 0.01))[1] for b in ("engine", "numpy")}
+    first = {b: timed(lambda b=b: run(b, x0[:1], 0.01))[1] for b in ("engine",)}
     for b, t in first.items():
         print(
             f"{b:6} backend, first solve in this process: {t:8.2f} s (compile, or load from the disk cache)"
@@ -73,28 +72,15 @@ def main() -> None:
 
     res, secs = {}, {}
     res["engine"], secs["engine"] = timed(lambda: run("engine", x0))
-    res["numpy"], secs["numpy"] = timed(lambda: run("numpy", x0))
-    res["numpy_sub"], secs["numpy_sub"] = timed(lambda: run("numpy", x0[:ref_runs]))
     res["scipy"], secs["scipy"] = timed(lambda: run("scipy", x0[:ref_runs]))
-    per_run = {
-        "engine": secs["engine"] / runs,
-        "numpy": secs["numpy"] / runs,
-        "scipy": secs["scipy"] / ref_runs,
-    }
-    for b, n in (("engine", runs), ("numpy", runs), ("numpy_sub", ref_runs), ("scipy", ref_runs)):
-        label = f"{b.removesuffix('_sub')} backend, {n} runs:"
+    per_run = {"engine": secs["engine"] / runs, "scipy": secs["scipy"] / ref_runs}
+    for b, n in (("engine", runs), ("scipy", ref_runs)):
+        label = f"{b} backend, {n} runs:"
         print(f"{label:28} {secs[b]:8.2f} s total, {secs[b] / n * 1e3:8.1f} ms/run")
-    print(
-        f"ratios per run: numpy/engine {per_run['numpy'] / per_run['engine']:.1f}x, "
-        f"scipy/engine {per_run['scipy'] / per_run['engine']:.1f}x, "
-        f"scipy/numpy {per_run['scipy'] / per_run['numpy']:.1f}x (batch of {runs}), "
-        f"{secs['scipy'] / secs['numpy_sub']:.1f}x (same {ref_runs} runs)"
-    )
-    same_en, gap_en = agreement(res["engine"], res["numpy"])
+    print(f"ratio per run: scipy/engine {per_run['scipy'] / per_run['engine']:.1f}x")
     sub_engine = run("engine", x0[:ref_runs])
     same_es, gap_es = agreement(sub_engine, res["scipy"])
     print(f"transmissions: mean {transmission_counts(res['engine']).sum(1).mean():.1f} per run")
-    print(f"engine and numpy agree on all {runs} runs: {same_en}, max event-time gap {gap_en:.2e} s")
     print(
         f"engine and scipy agree on the shared {ref_runs} runs: {same_es}, max event-time gap {gap_es:.2e} s"
     )

@@ -1,18 +1,15 @@
-"""Benchmark: how the solvers' cost grows with runs, horizon and number of nodes.
+"""Benchmark: how the engine's cost grows with runs, horizon and number of nodes.
 
-Robot arm (section 7) with the paper's first parameter row, noise and disturbance;
+Robot arm (section 8) with the paper's first parameter row, noise and disturbance;
 the N-node case uses `robot_arm_network` (N/2 independent arms, N sensor nodes).
 Times are measured in one process and reported with their ratio to the first entry
-of each series and, with both backends, the per-point ratio numpy/engine (these
-machines are shared: compare ratios, not seconds).
+of each series (these machines are shared: compare ratios, not seconds).
 
-    python benchmarks/bench_scaling.py                    # engine and numpy: runs 1..2600 (30 s), horizon 3..30 s, N 2..100
-    python benchmarks/bench_scaling.py --backend engine   # one backend only ("numba" is its earlier name)
-    python benchmarks/bench_scaling.py --backend numpy    # the batched numpy solver only ("fast" also works)
-    python benchmarks/bench_scaling.py --quick            # small sizes, for CI
+    python benchmarks/bench_scaling.py            # runs 1..2600 (30 s), horizon 3..30 s, N 2..100
+    python benchmarks/bench_scaling.py --quick    # small sizes, for CI
 
-Each problem structure is compiled (or loaded from the disk cache) once per backend
-before it is timed; that time is printed on its own line.
+Each problem structure is compiled (or loaded from the disk cache) once before it is
+timed; that time is printed on its own line.
 """
 
 from __future__ import annotations
@@ -24,10 +21,6 @@ import numpy as np
 
 from etobs import SaveAt, simulate
 from etobs.examples import random_initial_states, robot_arm, robot_arm_network
-
-#: ``--backend`` values: both backends, or one (earlier names accepted).
-CHOICES = {"both": ("engine", "numpy"), "engine": ("engine",), "numpy": ("numpy",)}
-ALIASES = {"numba": "engine", "fast": "numpy"}
 
 
 def timed(problem, x0, t_end, backends):
@@ -52,8 +45,6 @@ def series(title, label, points, backends):
     for b in backends:
         head += f" {b + ' [s]':>11} {'per run [ms]':>13} {'ratio':>6}"
     head += f" {'transmissions':>14}"
-    if len(backends) == 2:
-        head += f" {'numpy/engine':>13}"
     print(head)
     first: dict[str, float] = {}
     for key, runs, times in points:
@@ -64,24 +55,14 @@ def series(title, label, points, backends):
             line += f" {elapsed:>11.2f} {elapsed / runs * 1e3:>13.1f} {elapsed / first[b]:>6.2f}"
         sent = {times[b][1] for b in backends}
         line += f" {'/'.join(str(s) for s in sorted(sent)):>14}"
-        if len(backends) == 2:
-            line += f" {times['numpy'][0] / times['engine'][0]:>12.1f}x"
         print(line)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes for CI")
-    parser.add_argument(
-        "--backend",
-        type=lambda s: ALIASES.get(s, s),
-        choices=tuple(CHOICES),
-        default="both",
-        help="both (default), engine or numpy; the earlier names numba and fast are accepted",
-    )
     args = parser.parse_args()
-    backends = CHOICES[args.backend]
-    print(f"backends: {', '.join(backends)}")
+    backends = ("engine",)
     q = args.quick
     arm = robot_arm()
     x_all = random_initial_states(2600, seed=1)

@@ -113,7 +113,7 @@ def _node():
                 backend="jax",
             ),
             InputError,
-            r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\)",
+            r"`backend` must be one of \('auto', 'engine', 'scipy'\) \(or 'numba' for 'engine'\); got 'jax'",
         ),
         (lambda: solve("system", [0.0], (0, 1)), InputTypeError, r"`system` must be a HybridSystem; got str"),
         (

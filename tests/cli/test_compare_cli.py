@@ -16,7 +16,7 @@ SPEC = {
     "initial_states": {"low": [-1.0, -1.0], "high": [1.0, 1.0], "runs": 3, "seed": 4},
     "horizon": {"t_end": 8.0},
     "metrics": {"error_window": [6.0, 8.0], "error_grid_step": 0.01},
-    "execution": {"backend": "numpy"},
+    "execution": {"backend": "engine"},
     "rules": [
         {"name": "dynamic", "kind": "base"},
         {"name": "static", "kind": "static", "eps": 0.01},
@@ -44,7 +44,7 @@ t_end = 4.0
 error_window = [3.0, 4.0]
 error_grid_step = 0.01
 [execution]
-backend = "numpy"
+backend = "engine"
 [[rules]]
 name = "dynamic"
 kind = "base"
@@ -179,8 +179,8 @@ def test_auto_backend_is_decided_per_entry_by_simulate():
     assert spec.backend == "auto"
     backends = {e.network: e.backend for e in compare(spec).entries}
     assert backends == {"ideal": "engine", "lossy": "engine"}
-    numpy_spec = parse_compare_spec({**SPEC, "execution": {"backend": "fast"}})
-    assert numpy_spec.backend == "numpy"  # the earlier name
+    engine_spec = parse_compare_spec({**SPEC, "execution": {"backend": "numba"}})
+    assert engine_spec.backend == "engine"  # the earlier name
 
 
 def test_rule_errors_at_run_time_name_the_entry_and_node():

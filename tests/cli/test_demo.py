@@ -47,7 +47,7 @@ def test_demo_options(tmp_path):
     assert not (out / "states.png").exists()
 
 
-@pytest.mark.parametrize(("asked", "ran"), [("auto", "engine"), ("numba", "engine"), ("fast", "numpy")])
+@pytest.mark.parametrize(("asked", "ran"), [("auto", "engine"), ("numba", "engine"), ("scipy", "scipy")])
 def test_demo_backends_and_their_earlier_names(tmp_path, capsys, asked, ran):
     out = tmp_path / "ra"
     argv = ["demo", "robot-arm", "--out", str(out), "--t-end", "0.5", "--no-plots", "--backend", asked]
@@ -61,7 +61,14 @@ def test_demo_backend_help_names_the_backends(capsys):
     with pytest.raises(SystemExit):
         main(["demo", "robot-arm", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "{auto,engine,numpy,scipy}" in text and "numba and fast are accepted" in text
+    assert "auto (the compiled engine; the scipy reference for a rule of your own)" in text
+    assert "numba is an earlier name of engine" in text
+
+
+def test_demo_names_the_retired_numpy_backend(capsys):
+    with pytest.raises(SystemExit):
+        main(["demo", "robot-arm", "--backend", "numpy"])
+    assert "--backend` 'numpy' (the batched numpy solver) was retired" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -71,7 +78,10 @@ def test_demo_backend_help_names_the_backends(capsys):
         (["--x0", "3,2,nan,1"], r"--x0 must be 4 comma-separated finite numbers"),
         (["--window", "20"], r"--window must be 2 comma-separated finite numbers"),
         (["--t-end", "-1"], r"--t-end must be a positive number of seconds; got -1.0"),
-        (["--backend", "rk4"], r"argument --backend: invalid choice: 'rk4'"),
+        (
+            ["--backend", "rk4"],
+            r"argument --backend: `--backend` must be one of \('auto', 'engine', 'scipy'\)",
+        ),
     ],
 )
 def test_demo_bad_arguments(argv, match, capsys, tmp_path):

@@ -42,7 +42,9 @@ def test_sweep_command(tmp_path, capsys):
     assert "4 of 4 runs present (1 computed now, 3 reused)" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize(("flag", "resolved"), [("numba", "engine"), ("fast", "numpy"), ("scipy", "scipy")])
+@pytest.mark.parametrize(
+    ("flag", "resolved"), [("numba", "engine"), ("engine", "engine"), ("scipy", "scipy")]
+)
 def test_sweep_command_backend_and_its_earlier_names(tmp_path, capsys, flag, resolved):
     spec = write_spec(tmp_path / "s.toml", runs=2)
     argv = ["sweep", str(spec), "--out", str(tmp_path / "o"), "--executor", "serial", "--no-progress"]

@@ -7,7 +7,7 @@ from etobs.estimation import transmission_counts
 from . import scalar
 
 
-@pytest.mark.parametrize("backend", ["engine", "numpy", "scipy"])
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
 def test_dynamic_rule_event_times_match_closed_form(backend):
     expected = scalar.event_times(6)
     res = simulate(scalar.problem(), [0.0], expected[-1] + 0.01, backend=backend)
@@ -15,7 +15,7 @@ def test_dynamic_rule_event_times_match_closed_form(backend):
     np.testing.assert_allclose(res.transmission_times(0, 0), expected, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("backend", ["engine", "numpy", "scipy"])
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
 def test_eta_follows_its_closed_form_between_events(backend):
     times = scalar.event_times(2)
     grid = np.linspace(0.0, times[0], 7)[1:-1]

@@ -71,7 +71,7 @@ def _problem(plant, observer):
     return EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), _rule())], u=u)
 
 
-@pytest.mark.parametrize("backend", ["engine", "numpy", "scipy"])
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
 def test_params_give_the_same_run_as_the_numbers_written_in(backend):
     save = SaveAt(steps=False, grid=np.linspace(0.0, 8.0, 81))
     ref = simulate(_problem(*_hard_coded()), X0, 8.0, backend=backend, save=save)

@@ -114,7 +114,7 @@ def test_other_problem_errors():
         (
             {"backend": "rk4"},
             InputError,
-            r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\); got 'rk4'",
+            r"`backend` must be one of \('auto', 'engine', 'scipy'\) \(or 'numba' for 'engine'\); got 'rk4'",
         ),
         ({"e0": [0.0]}, InputError, r"`e0` has shape \(1,\); expected \(2,\)"),
     ],

@@ -30,12 +30,6 @@ def test_engine_and_scipy_backend_agree_on_the_paper_run(paper_run):
     assert_backends_agree(paper_run, ref)
 
 
-def test_numpy_solver_agrees_with_the_engine_on_the_paper_run(paper_run):
-    res = simulate(robot_arm(), X0_PAPER, T_END, backend="numpy")
-    assert res.ok and res.backend == "numpy"
-    assert_backends_agree(res, paper_run)
-
-
 @pytest.mark.slow
 def test_engine_and_scipy_backend_agree_on_random_runs():
     x0 = random_initial_states(3, seed=2024)

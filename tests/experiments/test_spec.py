@@ -74,8 +74,8 @@ def test_with_runs_and_seed():
         ({"execution": {"workers": 3}}, r"unknown key `execution.workers`"),
         (
             {"execution": {"backend": "gpu"}},
-            r"`execution.backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\) "
-            r"\(or the earlier names 'numba', 'fast'\); got 'gpu'",
+            r"`execution.backend` must be one of \('auto', 'engine', 'scipy'\) "
+            r"\(or 'numba' for 'engine'\); got 'gpu'",
         ),
     ],
 )

@@ -311,11 +311,15 @@ def test_auto_is_passed_to_simulate_and_earlier_backend_names_are_accepted(tiny)
     assert tiny.with_backend("scipy").backend == "scipy"
     assert tiny.with_backend("scipy").identity() != tiny.identity()
     assert tiny.with_backend("numba").backend == "engine"
-    assert tiny.with_backend("fast").backend == "numpy"
+    for retired in ("numpy", "fast"):
+        with pytest.raises(
+            SpecError, match=rf"^`execution.backend` '{retired}' \(the batched numpy solver\) was retired"
+        ):
+            tiny.with_backend(retired)
     assert tiny.with_backend("numba").identity() == tiny.with_backend("engine").identity()
 
 
-def test_engine_backend_sweep_gives_the_numpy_backend_counts(tmp_path):
+def test_engine_backend_sweep_gives_the_scipy_backend_counts(tmp_path):
     def spec(backend):
         return parse_spec(
             {
@@ -323,10 +327,10 @@ def test_engine_backend_sweep_gives_the_numpy_backend_counts(tmp_path):
                 "system": {"factory": "robot_arm", "fixed": {}},
                 "rows": [{"eps": [10.0, 10.0]}, {"eps": [100.0, 100.0]}],
                 "initial_states": {"low": [0, 0, 0, 0], "high": [20, 10, 20, 10], "runs": 3, "seed": 1},
-                "horizon": {"t_end": 5.0},
+                "horizon": {"t_end": 3.0},
                 "metrics": {
-                    "transmissions_window": [0.0, 5.0],
-                    "error_window": [4.0, 5.0],
+                    "transmissions_window": [0.0, 3.0],
+                    "error_window": [2.0, 3.0],
                     "error_grid_step": 0.01,
                 },
                 "execution": {"chunk_size": 2, "backend": backend},
@@ -334,7 +338,7 @@ def test_engine_backend_sweep_gives_the_numpy_backend_counts(tmp_path):
         )
 
     assert spec("auto").backend == "auto"
-    batched = run_sweep(spec("numpy"), tmp_path / "numpy", executor="serial", progress=False)
+    batched = run_sweep(spec("scipy"), tmp_path / "scipy", executor="serial", progress=False)
     ours = run_sweep(spec("engine"), tmp_path / "engine", executor="serial", progress=False)
     auto = run_sweep(spec("auto"), tmp_path / "auto", executor="serial", progress=False)
     assert [r["transmissions"] for r in ours.runs] == [r["transmissions"] for r in batched.runs]

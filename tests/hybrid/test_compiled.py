@@ -1,11 +1,10 @@
-"""The engine (compile_system + solve_compiled) against the numpy solver and the scipy reference.
+"""The engine (compile_system + solve_compiled) against closed forms and the scipy reference.
 
 The systems of ``systems.py`` are written once, for one run: ``system.compiled()`` is
-their engine form (solved here with ``solve_compiled``), ``solve(..., backend=...)``
-runs them on the numpy solver and the scipy reference. The contract itself is checked
-on all three backends in ``test_solver.py``; this file checks what is the engine's own
-(parameter rows, threads, buffers, compilation, failures) and that its numbers match
-the other two.
+their engine form (solved here with ``solve_compiled``), ``solve(..., backend="scipy")``
+runs them on the scipy reference. The contract itself is checked on both backends in
+``test_solver.py``; this file checks what is the engine's own (parameter rows, threads,
+buffers, compilation, failures) and that its numbers match.
 """
 
 import numba
@@ -41,7 +40,7 @@ def bounce_times(h0, v0, r, n, g=G):
     return np.array(out)
 
 
-# ---- against the closed form, the numpy solver and the scipy reference ---------------
+# ---- against the closed form and the scipy reference ------------------------------------
 
 
 def test_status_codes_match_the_enum():
@@ -49,60 +48,60 @@ def test_status_codes_match_the_enum():
         assert getattr(_kernel, status.name) == status.value
 
 
-def test_ball_matches_closed_form_numpy_solver_and_scipy_reference(ball):
+def test_ball_matches_closed_form_and_scipy_reference(ball):
     grid = np.linspace(0.0, 1.5, 31)
     save = SaveAt(steps=True, grid=grid)
     ours = solve_compiled(ball, X0, (0.0, 1.5), params=[0.8, G], save=save)
-    ref = solve(bouncing_ball(0.8), X0, (0.0, 1.5), save=save, backend="numpy")
     sci = solve(bouncing_ball(0.8), X0, (0.0, 1.5), save=save, backend="scipy")
     # the front door passes the system's params to the same compiled system
     front = solve(bouncing_ball(0.8), X0, (0.0, 1.5), save=save, backend="engine")
     np.testing.assert_array_equal(front.jumps.t, ours.jumps.t)
     np.testing.assert_array_equal(front.grid.x, ours.grid.x)
-    assert ours.backend == "engine" and ours.ok and ref.backend == "numpy" and sci.backend == "scipy"
+    assert ours.backend == "engine" and ours.ok and sci.backend == "scipy"
     assert ours.rule_names == ("impact",)
     for r, (h0, v0) in enumerate(X0):
         t = ours.jumps.times(r, 0)
-        assert t.size == ref.jumps.times(r, 0).size == sci.jumps.times(r, 0).size >= 1
+        assert t.size == sci.jumps.times(r, 0).size >= 1
         np.testing.assert_allclose(t, bounce_times(h0, v0, 0.8, t.size), rtol=0, atol=1e-9)
-        np.testing.assert_allclose(t, ref.jumps.times(r, 0), rtol=0, atol=1e-11)
         np.testing.assert_allclose(t, sci.jumps.times(r, 0), rtol=0, atol=1e-9)
-        np.testing.assert_array_equal(ours.arcs[r].j, ref.arcs[r].j)
-        np.testing.assert_allclose(ours.arcs[r].t, ref.arcs[r].t, atol=1e-11)
-        np.testing.assert_allclose(ours.arcs[r].x, ref.arcs[r].x, atol=1e-9)
-    np.testing.assert_array_equal(ours.grid.j, ref.grid.j)
+        # the arc holds both sides of every jump: j steps by one at each impact time
+        arc = ours.arcs[r]
+        at_jump = np.flatnonzero(np.diff(arc.j) == 1)
+        np.testing.assert_array_equal(arc.t[at_jump], t)
+        np.testing.assert_array_equal(arc.t[at_jump + 1], t)
+        np.testing.assert_allclose(arc.x[at_jump + 1, 1], -0.8 * arc.x[at_jump, 1], rtol=1e-12)
     np.testing.assert_array_equal(ours.grid.j, sci.grid.j)
-    np.testing.assert_allclose(ours.grid.x, ref.grid.x, atol=1e-9)
     np.testing.assert_allclose(ours.grid.x, sci.grid.x, atol=1e-8)
-    np.testing.assert_array_equal(ours.n_steps, ref.n_steps)
     np.testing.assert_allclose(ours.x_final, sci.x_final, atol=1e-8)
 
 
-def test_short_excursions_are_found_like_the_numpy_solver():
+def test_short_excursions_are_found_at_loose_tolerances():
     # Loose tolerances make steps of ~2 s while the event function is positive for only
     # 0.09 s around each peak (test_solver checks that every backend finds all 7): the
-    # engine finds them where the numpy solver does, the scipy reference close by.
+    # engine finds them near where it does at tight tolerances, the scipy reference too.
     loose = SolverOptions(rtol=1e-3, atol=1e-3)
     x0, span = [0.0, 1.0], (0.0, 20.0)
     system = grazing_oscillator()
     guarded = solve_compiled(system.compiled(), x0, span, params=system.params, options=loose)
-    ref = solve(system, x0, span, options=loose, backend="numpy")
     tight = solve_compiled(system.compiled(), x0, span, params=system.params)
     sci = solve(system, x0, span, backend="scipy")
-    assert len(guarded.jumps) == len(ref.jumps) == len(tight.jumps) == len(sci.jumps) == 7
-    np.testing.assert_allclose(guarded.jumps.t, ref.jumps.t, rtol=0, atol=1e-11)
+    assert len(guarded.jumps) == len(tight.jumps) == len(sci.jumps) == 7
+    # at rtol = 1e-3 the crossings drift by integration error (0.084 s at most here)
+    np.testing.assert_allclose(guarded.jumps.t, tight.jumps.t, rtol=0, atol=0.15)
     # grazing crossings (g' ~ 0.045): bound the error in g, not in t
     assert np.all(np.abs(tight.jumps.t - sci.jumps.t) * np.cos(np.arcsin(0.999)) < 1e-9)
 
 
 @pytest.mark.slow
-def test_dopri5_matches_numpy_solver(ball):
+def test_dopri5_matches_closed_form(ball):
     opts = SolverOptions(method="dopri5", rtol=1e-9, atol=1e-9)
     save = SaveAt(steps=False)
     ours = solve_compiled(ball, X0, (0.0, 1.5), params=[0.8, G], options=opts, save=save)
-    ref = solve(bouncing_ball(0.8), X0, (0.0, 1.5), options=opts, save=save, backend="numpy")
-    np.testing.assert_allclose(ours.jumps.t, ref.jumps.t, atol=1e-11)
-    np.testing.assert_array_equal(ours.n_steps, ref.n_steps)
+    eight = solve_compiled(ball, X0, (0.0, 1.5), params=[0.8, G], save=save)
+    assert ours.ok and not np.array_equal(ours.n_steps, eight.n_steps)  # another method ran
+    for r, (h0, v0) in enumerate(X0):
+        t = ours.jumps.times(r, 0)
+        np.testing.assert_allclose(t, bounce_times(h0, v0, 0.8, t.size), rtol=0, atol=1e-8)
 
 
 # ---- parameters, threads, buffers, limits ------------------------------------------------
@@ -222,8 +221,6 @@ def test_a_function_numba_cannot_compile_is_a_model_error():
     system = HybridSystem(n=1, n_rules=1, flow=flow, guard=lambda t, x: x - 2.0, jump=lambda k, t, x: x / 2)
     with pytest.raises(ModelError, match=r"^`flow` cannot be compiled: .*backend='scipy'"):
         solve(system, [1.0], (0.0, 1.0), backend="engine")
-    with pytest.raises(ModelError, match=r"^`flow` cannot be compiled"):
-        solve(system, [1.0], (0.0, 1.0), backend="numpy")
     sol = solve(system, [1.0], (0.0, 1.0), backend="scipy")
     t_hit = np.log(2.0) / 2.0  # x = exp(2 t) reaches 2 and is halved back to 1
     np.testing.assert_allclose(sol.jumps.t, [t_hit, 2 * t_hit], atol=1e-9)

@@ -1,8 +1,8 @@
 """The solver contract (module docstring of etobs.hybrid.solver) on every backend.
 
-One contract, three solvers: each contract test takes the ``backend`` fixture and runs
-on the compiled engine, the batched numpy solver and the scipy reference, against closed
-forms and the contract's defining properties. Tests about one solver's own behaviour
+One contract, two solvers: each contract test takes the ``backend`` fixture and runs
+on the compiled engine and the scipy reference, against closed forms and the contract's
+defining properties. Tests about one solver's own behaviour
 (the batched form's messages, where a wrong shape surfaces) say which solver they cover.
 """
 
@@ -14,7 +14,7 @@ from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Sta
 
 from .systems import G, bouncing_ball, grazing_oscillator, two_clocks
 
-BACKENDS = ("engine", "numpy", "scipy")
+BACKENDS = ("engine", "scipy")
 
 
 @pytest.fixture(params=BACKENDS)
@@ -92,7 +92,7 @@ def test_a_short_excursion_inside_one_step_is_not_missed(backend):
 
 def test_simultaneous_events_jump_once_each_in_rule_order(backend):
     # Clocks of periods 0.5 (rule 0) and 0.25 (rule 1): rule 1 alone at 0.25 and 0.75,
-    # both at 0.5 and 1.0, rule 0 first. The engine and the numpy solver jump both at
+    # both at 0.5 and 1.0, rule 0 first. The engine jumps both at
     # one time; the scipy reference may find rule 1 a rounding error later (its clock
     # restarted at a located time), within the event accuracy `event_xtol`.
     sol = solve(two_clocks(0.5, 0.25), [0.0, 0.0], (0.0, 1.01), backend=backend)
@@ -294,16 +294,6 @@ def test_wrong_shape_is_a_model_error_status_on_the_engine(name):
     assert f"`{name}` returned the wrong shape" in sol.messages()[0]
 
 
-@pytest.mark.parametrize("name", ["flow", "guard", "jump"])
-def test_wrong_shape_raises_a_model_error_on_the_numpy_solver(name):
-    # the numpy solver calls the engine's compiled functions row by row: their status
-    # becomes the error
-    n_out = 1 if name == "guard" else 2
-    match = f"^`{name}` returned the wrong shape: expected a 1-D result of length {n_out} for one run"
-    with pytest.raises(ModelError, match=match):
-        solve(_bad_system(name), [0.0, 0.0], (0.0, 1.0), backend="numpy")
-
-
 @pytest.mark.parametrize(("name", "got", "expected"), [("flow", 1, 2), ("guard", 2, 1), ("jump", 1, 2)])
 def test_wrong_shape_raises_a_model_error_on_the_scipy_reference(name, got, expected):
     # the reference calls the Python functions as they are and checks each result
@@ -313,28 +303,24 @@ def test_wrong_shape_raises_a_model_error_on_the_scipy_reference(name, got, expe
         solve(_bad_system(name), [0.0, 0.0], (0.0, 1.0), backend="scipy")
 
 
-# ---- the batched form (numpy solver and scipy reference) ------------------------------
+# ---- the batched form (the scipy reference's) --------------------------------------------
 
 
 def test_a_batched_system_gives_the_results_of_its_one_run_form():
     system = bouncing_ball(0.8)
     x0 = [[1.0, 0.0], [2.0, 1.0]]
-    one_run = solve(system, x0, (0.0, 1.5), backend="numpy")
-    for compiled in (True, False):
-        batched = system.batched(compiled=compiled)
-        assert isinstance(batched, BatchedSystem) and batched.rule_names == ("impact",)
-        for backend in ("auto", "numpy"):
-            sol = solve(batched, x0, (0.0, 1.5), backend=backend)
-            assert sol.backend == "numpy"
-            np.testing.assert_array_equal(sol.jumps.t, one_run.jumps.t)
-        sci = solve(batched, x0, (0.0, 1.5), backend="scipy")
+    one_run = solve(system, x0, (0.0, 1.5))
+    batched = system.batched()
+    assert isinstance(batched, BatchedSystem) and batched.rule_names == ("impact",)
+    for backend in ("auto", "scipy"):
+        sci = solve(batched, x0, (0.0, 1.5), backend=backend)
         assert sci.backend == "scipy"
         np.testing.assert_allclose(sci.jumps.t, one_run.jumps.t, rtol=0, atol=1e-9)
 
 
 def test_a_batched_system_cannot_run_on_the_engine():
     with pytest.raises(InputError, match="backend='engine' needs a HybridSystem written for one run"):
-        solve(bouncing_ball().batched(compiled=False), [1.0, 0.0], (0.0, 1.0), backend="engine")
+        solve(bouncing_ball().batched(), [1.0, 0.0], (0.0, 1.0), backend="engine")
 
 
 def test_batched_function_with_wrong_shape_is_named():
@@ -349,9 +335,18 @@ def test_batched_function_with_wrong_shape_is_named():
         solve(bad, [0.0, 0.0], (0.0, 1.0))
 
 
-def test_unknown_backend_is_named():
-    with pytest.raises(InputError, match=r"`backend` must be one of \('auto', 'engine', 'numpy', 'scipy'\)"):
-        solve(two_clocks(1, 1), [0.0, 0.0], (0.0, 1.0), backend="fast")
+def test_unknown_and_retired_backends_are_named():
+    with pytest.raises(
+        InputError,
+        match=r"^`backend` must be one of \('auto', 'engine', 'scipy'\) \(or 'numba' for 'engine'\); got 'jax'$",
+    ):
+        solve(two_clocks(1, 1), [0.0, 0.0], (0.0, 1.0), backend="jax")
+    for name in ("numpy", "fast"):
+        with pytest.raises(
+            InputError, match=rf"^`backend` '{name}' \(the batched numpy solver\) was retired: "
+        ):
+            solve(two_clocks(1, 1), [0.0, 0.0], (0.0, 1.0), backend=name)
+    assert solve(two_clocks(1, 1), [0.0, 0.0], (0.0, 1.0), backend="numba").backend == "engine"
 
 
 def test_auto_is_the_engine_for_a_one_run_system():

@@ -22,18 +22,21 @@ def positive_int(text: str) -> int:
     return value
 
 
-#: ``--backend`` choices, as :func:`~etobs.estimation.simulate.simulate` takes them.
-BACKEND_CHOICES = ("auto", "engine", "numpy", "scipy")
 BACKEND_HELP = (
-    "auto (the compiled engine when it models the problem, else numpy), engine, numpy "
-    "(the batched numpy solver) or scipy (the solve_ivp reference); the earlier names "
-    "numba and fast are accepted"
+    "auto (the compiled engine; the scipy reference for a rule of your own), engine or "
+    "scipy (the solve_ivp reference); numba is an earlier name of engine"
 )
 
 
 def backend(text: str) -> str:
-    """An argparse type for ``--backend``: earlier names mapped to the current ones."""
-    return {"numba": "engine", "fast": "numpy"}.get(text, text)
+    """An argparse type for ``--backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
+    from etobs.errors import InputError
+    from etobs.hybrid.solver import check_backend
+
+    try:
+        return check_backend(text, "--backend")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, Any]:

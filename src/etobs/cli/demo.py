@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from etobs import __version__
-from etobs.cli._args import BACKEND_CHOICES, BACKEND_HELP, backend
+from etobs.cli._args import BACKEND_HELP, backend
 from etobs.estimation import (
     max_estimation_error,
     min_inter_event_time,
@@ -71,7 +71,6 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--backend",
         type=backend,
-        choices=BACKEND_CHOICES,
         default="auto",
         help=f"solver: {BACKEND_HELP} (default auto)",
     )

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from etobs.cli._args import BACKEND_CHOICES, BACKEND_HELP, backend, positive_int
+from etobs.cli._args import BACKEND_HELP, backend, positive_int
 from etobs.errors import InputError
 from etobs.experiments import SweepResult, load_spec, run_sweep
 from etobs.experiments.executors import EXECUTORS
@@ -30,7 +30,6 @@ def _execution_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--backend",
         type=backend,
-        choices=BACKEND_CHOICES,
         default=None,
         help=f"solver, overriding the spec's execution.backend: {BACKEND_HELP}",
     )

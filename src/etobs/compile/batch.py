@@ -1,4 +1,4 @@
-"""Calling a compiled one-run function on a batch of runs, for the batched numpy solver.
+"""Calling a compiled one-run function on a batch of runs (to evaluate results on grids).
 
 :func:`batch_call` loops over the rows in compiled code and calls the function by
 address, so a batch costs one Python call. It is compiled once per machine.

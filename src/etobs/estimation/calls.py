@@ -1,10 +1,10 @@
 """The problem's one-run model functions called on batches of runs.
 
-The batched numpy solver and the helpers that evaluate results (``xhat`` on a grid, the
-initial state) work on arrays with the runs on axis 0. :class:`ModelCalls` gives them
-``f_p``, ``h``, ``f_o`` and ``psi`` in that form: compiled (one compiled loop over the
-rows, see :mod:`etobs.compile.batch`) or, for the scipy reference and for functions
-numba cannot compile, the user's Python functions called row by row.
+The scipy reference's model and the helpers that evaluate results (``xhat`` on a grid,
+the initial state) work on arrays with the runs on axis 0. :class:`ModelCalls` gives
+them ``f_p``, ``h``, ``f_o`` and ``psi`` in that form: compiled (one compiled loop over
+the rows, see :mod:`etobs.compile.batch`; for evaluating results) or the user's Python
+functions called row by row (the reference, and functions numba cannot compile).
 """
 
 from __future__ import annotations

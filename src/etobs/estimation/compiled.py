@@ -74,7 +74,7 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
 
     why = engine_support(problem)
     if why:
-        raise InputError(f"backend='engine': {why}; use backend='numpy' or 'scipy'")
+        raise InputError(f"backend='engine': {why}; use backend='scipy' (the reference runs any Python)")
     lay = problem.layout
     forms = [engine_form_of(ch.rule) for ch in lay.channels]
     src = ms.model_source(problem, forms)  # type: ignore[arg-type] - engine_support checked them

@@ -245,16 +245,16 @@ class EstimationProblem:
             q[:, lay.run] = np.arange(b) if run_ids is None else run_ids
         return q
 
-    def hybrid_system(self, compiled: bool = True) -> BatchedSystem:
-        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.BatchedSystem`.
+    def hybrid_system(self) -> BatchedSystem:
+        """The hybrid model (16)--(22) as a :class:`~etobs.hybrid.BatchedSystem` (the reference's).
 
         Jump rules ``0 .. C-1`` are the nodes' transmissions (output nodes, then input
-        nodes); with a network, rules ``C .. 2C-1`` deliver their packets. The model
-        functions are compiled (``compiled=True``) or the user's Python functions.
+        nodes); with a network, rules ``0 .. C-1`` deliver their packets and ``C .. 2C-1``
+        are the transmissions. It calls the user's Python functions as they are.
         """
         from etobs.estimation.assembly import build_system
 
-        return build_system(self, self.calls(compiled))
+        return build_system(self, self.calls(False))
 
 
 def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:

@@ -61,7 +61,7 @@ class EstimationResult:
 
     @property
     def backend(self) -> str:
-        """The solver that ran: ``"engine"``, ``"numpy"`` or ``"scipy"`` (why: ``backend_reason``)."""
+        """The solver that ran: ``"engine"`` or ``"scipy"`` (why: ``backend_reason``)."""
         return self.solution.backend
 
     @property

@@ -12,11 +12,7 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
-from etobs.hybrid.solver import solve
-
-BACKENDS = ("auto", "engine", "numpy", "scipy")
-#: Earlier names of two backends, still accepted.
-ALIASES = {"numba": "engine", "fast": "numpy"}
+from etobs.hybrid.solver import check_backend
 
 
 def simulate(
@@ -51,16 +47,15 @@ def simulate(
         Solver settings (tolerances, jump limit, event sampling).
     save : SaveAt, optional
         What to keep: full arcs (default) and/or states on a time grid.
-    backend : {"auto", "engine", "numpy", "scipy"}
+    backend : {"auto", "engine", "scipy"}
         ``"engine"``: the compiled solver (:mod:`etobs.estimation.compiled`), one run per
-        thread, with the model's functions compiled; ``"numpy"``: the batched numpy
-        solver (it runs the extensions the engine does not model yet: input nodes, the
-        observer-copy hold, networks, rules of your own); ``"scipy"``: the
-        ``solve_ivp`` reference, which calls your Python functions as they are (any
-        Python). ``"auto"`` (default) is the engine when it models the problem and
-        ``"numpy"`` otherwise; the result's ``backend`` and ``backend_reason`` say which
-        and why. ``"numba"`` and ``"fast"`` are earlier names of ``"engine"`` and
-        ``"numpy"``.
+        thread, with the model's functions compiled; it runs every etobs rule and
+        extension. ``"scipy"``: the ``solve_ivp`` reference, which calls your Python
+        functions as they are (any Python). ``"auto"`` (default) is the engine, or the
+        reference for a rule of your own (a ``TriggerRule`` the engine cannot compile);
+        the result's ``backend`` and ``backend_reason`` say which and why. ``"numba"`` is
+        an earlier name of ``"engine"``; the batched numpy solver (``"numpy"``,
+        ``"fast"``) was retired.
     run_ids : array_like of int, shape (B,), optional
         With a network: the index of each run in its random streams (default
         ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
@@ -80,10 +75,7 @@ def simulate(
     """
     if not isinstance(problem, EstimationProblem):
         raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
-    backend = ALIASES.get(backend, backend) if isinstance(backend, str) else backend
-    if backend not in BACKENDS:
-        raise InputError(f"`backend` must be one of {BACKENDS}; got {backend!r}")
-    backend, reason = choose_backend(problem, backend)
+    backend, reason = choose_backend(problem, check_backend(backend))
     p, o = problem.plant, problem.observer
     t0 = v.real("t0", t0)
     t_end = v.real("t_end", t_end)
@@ -105,12 +97,8 @@ def simulate(
 
         cp = compile_problem(problem)
         sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=save)
-    elif backend == "numpy":
-        sol = solve(problem.hybrid_system(compiled=True), q0, (t0, t_end), options=options, save=save)
     else:
-        sol = solve_reference(
-            problem.hybrid_system(compiled=False), q0, (t0, t_end), options=options, save=save
-        )
+        sol = solve_reference(problem.hybrid_system(), q0, (t0, t_end), options=options, save=save)
     return EstimationResult(problem=problem, solution=sol, backend_reason=reason)
 
 
@@ -122,7 +110,7 @@ def choose_backend(problem: EstimationProblem, backend: str = "auto") -> tuple[s
 
     why = engine_support(problem)
     if why:
-        return "numpy", f"auto: {why}, so the batched numpy solver runs it"
+        return "scipy", f"auto: {why}, so the scipy reference runs it (one run at a time, in Python)"
     return "engine", "auto: the engine models this problem"
 
 

@@ -18,7 +18,7 @@ A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
     [solver]                       # any SolverOptions field
     rtol = 1e-10
     [execution]
-    backend = "auto"               # the engine where it models the entry, else numpy
+    backend = "auto"               # the engine (the scipy reference for a rule of your own)
 
     [[rules]]                      # one entry per rule; per-node values are a number
     name = "dynamic (paper)"       # (every node) or a list (one per node)

@@ -26,7 +26,7 @@ A spec is data, usually a TOML file (see ``examples/table1.toml``)::
     rtol = 1e-10
     [execution]
     chunk_size = 100               # runs solved together
-    backend = "auto"               # or "engine", "numpy", "scipy" (see etobs.simulate)
+    backend = "auto"               # or "engine", "scipy" (see etobs.simulate)
 
 Every key is checked: unknown keys are rejected and a wrong value names its key.
 """
@@ -45,13 +45,9 @@ from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.errors import InputError
-from etobs.estimation.simulate import ALIASES, BACKENDS
 from etobs.hybrid.options import SolverOptions
+from etobs.hybrid.solver import check_backend
 
-#: ``execution.backend`` values, as :func:`~etobs.estimation.simulate.simulate` takes them.
-SWEEP_BACKENDS = BACKENDS
-#: Earlier names of two backends (``"numba"``, ``"fast"``), still accepted in specs.
-BACKEND_ALIASES = ALIASES
 _SOLVER_KEYS = {
     "method",
     "rtol",
@@ -157,12 +153,11 @@ class SweepSpec:
     def backend(self) -> str:
         """The solver backend asked for: ``execution.backend`` (default ``"auto"``).
 
-        Earlier names are given as the current ones (``"numba"`` as ``"engine"``,
-        ``"fast"`` as ``"numpy"``). ``"auto"`` is passed to
-        :func:`~etobs.estimation.simulate.simulate`, which picks the engine when it
-        models the problem and the numpy solver otherwise.
+        ``"numba"`` is given as ``"engine"``. ``"auto"`` is passed to
+        :func:`~etobs.estimation.simulate.simulate`, which picks the engine (or the scipy
+        reference for a rule of your own).
         """
-        return backend_name(self.raw.get("execution", {}).get("backend", "auto"))
+        return parse_backend(self.raw.get("execution", {}).get("backend", "auto"))
 
     @property
     def options(self) -> SolverOptions:
@@ -287,20 +282,12 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
     )
 
 
-def backend_name(value: Any) -> str:
-    """The current name of a backend (earlier names mapped, others unchanged)."""
-    return BACKEND_ALIASES.get(value, value) if isinstance(value, str) else value
-
-
 def parse_backend(value: Any) -> str:
-    """Validate ``execution.backend``: one of :data:`SWEEP_BACKENDS` or an earlier name."""
-    name = backend_name(value)
-    if name not in SWEEP_BACKENDS:
-        raise SpecError(
-            f"`execution.backend` must be one of {SWEEP_BACKENDS} (or the earlier names "
-            f"'numba', 'fast'); got {value!r}"
-        )
-    return str(name)
+    """Validate ``execution.backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
+    try:
+        return check_backend(value, "execution.backend")
+    except InputError as exc:
+        raise SpecError(str(exc)) from None
 
 
 def parse_initial_states(table: Any) -> InitialStates:

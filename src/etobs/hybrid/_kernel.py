@@ -1,4 +1,4 @@
-"""The compiled solver kernel (numba): one run per thread, the fast solver's algorithm.
+"""The compiled solver kernel (numba): one run per thread (the contract of :mod:`etobs.hybrid.solver`).
 
 This module imports numba at the top; :mod:`etobs.hybrid.compiled` imports it only
 when the compiled backend is asked for, so numba stays optional.

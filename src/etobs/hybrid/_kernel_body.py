@@ -254,7 +254,7 @@ def _solve_one(
                 st = MODEL_ERROR
 
     while st == RUNNING:
-        # ---- one step (see _FastSolver._advance) ----
+        # ---- one step ----
         remaining = t_end - t
         hh = min(min(h, max_step), remaining)
         last = hh >= remaining
@@ -318,7 +318,7 @@ def _solve_one(
         h = max(h, h_next) if (last and accept) else h_next
         too_many = steps + rejected_n >= max_steps
         if accept:
-            # ---- accepted step (see _FastSolver._accept) ----
+            # ---- accepted step ----
             t_start = t
             t1 = t_end if last else t + hh
             guard_call(t1, x_new, p, args, g1)
@@ -509,7 +509,7 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
 
 @jit
 def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs, xtol_t):
-    """θ of the first event in the step, or NaN (see ``_FastSolver._locate``)."""
+    """θ of the first event in the step, or NaN (the contract's points 2 and 3)."""
     m = g0.shape[0]
     # samples θ = i/S (i = 1..S-1), then the end θ = 1, then maybe the peak probe
     ns = 0
@@ -566,7 +566,7 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
 
 @jit
 def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol, xs, gtmp):
-    """Scalar version of :func:`etobs.hybrid.rootfind.bracket_root`; returns the right end."""
+    """Regula falsi (Illinois) with bisection fallback on ``[lo, hi]``; returns the right end."""
     side = 0
     width_before = hi - lo
     for it in range(MAX_ROOT_ITER):

@@ -112,12 +112,13 @@ def compile_system(
     *,
     n_params: int = 0,
     rule_names: tuple[str, ...] = (),
+    n_flow: int | None = None,
 ) -> CompiledSystem:
     """A :class:`CompiledSystem` from one-run Python functions.
 
     ``flow(t, x) -> x'``, ``guard(t, x) -> g`` (shape ``(n_rules,)``) and
     ``jump(k, t, x) -> x+``, on 1-D arrays; with ``n_params > 0`` each also takes the
-    run's parameter vector ``p`` last.
+    run's parameter vector ``p`` last. ``n_flow`` as in :class:`CompiledSystem`.
 
     Examples
     --------
@@ -152,6 +153,7 @@ def compile_system(
         addresses=tuple(f.address for f in fns),  # type: ignore[arg-type]
         n_params=n_params,
         rule_names=rule_names,
+        n_flow=n_flow,
         keep=fns,
     )
 

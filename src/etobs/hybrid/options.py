@@ -20,7 +20,7 @@ class SolverOptions:
     Parameters
     ----------
     method : {"dop853", "dopri5"}
-        Embedded Runge--Kutta pair of the fast solver: Dormand--Prince 8(5,3) with
+        Embedded Runge--Kutta pair of the engine: Dormand--Prince 8(5,3) with
         7th-order dense output (default) or Dormand--Prince 5(4) with 4th-order dense
         output.
     rtol, atol : float

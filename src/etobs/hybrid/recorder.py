@@ -1,6 +1,6 @@
 """Collects what a solve keeps (steps, jumps, grid values) and builds the results.
 
-Shared by the fast solver and the reference backend so both return the same objects.
+Used by the reference backend; the engine fills the same result objects from its buffers.
 """
 
 from __future__ import annotations

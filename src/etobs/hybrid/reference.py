@@ -1,6 +1,6 @@
 """Reference backend: one run at a time with :func:`scipy.integrate.solve_ivp`.
 
-Slow and simple, it exists to cross-check the fast solver with an independent
+Slow and simple, it exists to cross-check the engine with an independent
 integrator and event locator. Each flow segment is a ``solve_ivp`` call (method
 ``DOP853``) with one terminal event per rule, restarted after every jump.
 
@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from etobs.errors import ModelError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import HybridSolution
@@ -44,7 +45,7 @@ def brentq(*args: Any, **kwargs: Any) -> Any:
 
 # After brentq (or solve_ivp's own location), the event time is moved right by at most
 # this many xtol/4 until an event function is >= 0 there, so the state is in the jump
-# set, as in the fast solver.
+# set, as in the engine.
 _NUDGES = 64
 
 
@@ -63,7 +64,7 @@ def solve_reference(
     Python functions are called as they are, uncompiled.
     """
     if isinstance(system, HybridSystem):
-        system = system.batched(compiled=False)
+        system = system.batched()
     X, t0, t_end = check_inputs(system, x0, t_span)
     opts = options or SolverOptions()
     save = save or SaveAt()
@@ -124,11 +125,10 @@ class _Run:
         # Guard values along the dense output of the current segment, by time:
         # locate() and brentq evaluate the bracket ends more than once.
         self.on_dense: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        flow = system.flow
+        flow, n = system.flow, system.n
 
         def fun(t: float, x: np.ndarray) -> Any:
-            # solve_ivp converts the result with np.asarray(..., dtype=float) itself
-            return flow(np.array((t,)), x[None])[0]
+            return _checked("flow", flow(np.array((t,)), x[None]), (1, n))[0]
 
         self.fun = fun
         self.events = [self._event(k) for k in range(system.n_rules)] or None
@@ -147,13 +147,13 @@ class _Run:
         if x is last_x and t == last_t:
             return last_g
         # a copy: the values are remembered, whatever the guard does with its output
-        g = np.array(self.sys.guard(np.array((t,)), x[None]), dtype=float)[0]
+        g = _checked("guard", self.sys.guard(np.array((t,)), x[None]), (1, self.sys.n_rules))[0].copy()
         self.last = (t, x, g)
         return g
 
     def gk(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Event functions at many points, t (K,), x (K, n) -> (K, m)."""
-        return np.asarray(self.sys.guard(t, x), dtype=float)
+        return _checked("guard", self.sys.guard(t, x), (t.shape[0], self.sys.n_rules))
 
     def at(self, dense: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
         """State and event functions at ``t`` on the dense output of this segment."""
@@ -188,7 +188,9 @@ class _Run:
             for k in fire:
                 if self.j >= self.opts.max_jumps:
                     return Status.MAX_JUMPS
-                xn = np.asarray(self.sys.jump(int(k), np.array([self.t]), self.x[None]), dtype=float)[0]
+                xn = _checked(
+                    "jump", self.sys.jump(int(k), np.array([self.t]), self.x[None]), (1, self.sys.n)
+                )[0]
                 self.rec.jumps(self.b, int(k), np.array([self.t]), np.array([self.j]))
                 self.j += 1
                 self.x = xn
@@ -214,7 +216,7 @@ class _Run:
         )
         self.n_steps += sol.t.size - 1
         if sol.status == -1:
-            # Report where the integration actually stopped, like the fast solver.
+            # Report where the integration actually stopped, like the engine.
             self.t, self.x = float(sol.t[-1]), np.asarray(sol.y[:, -1], dtype=float)
             self.keep(self.t, self.x)
             dx = np.asarray(self.fun(self.t, self.x), dtype=float)
@@ -302,3 +304,11 @@ class _Run:
                 break
             best = min(best + self.opts.event_xtol / 4, self.t_end)
         return best
+
+
+def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``out`` as a float array of the ``shape`` a batched function must return."""
+    arr = np.asarray(out, dtype=float)
+    if arr.shape != shape:
+        raise ModelError(f"`{name}` returned an array of shape {arr.shape}; expected {shape}")
+    return arr

@@ -7,7 +7,8 @@ else about it.
 Users write :class:`HybridSystem` for one run, on 1-D arrays, like every function in
 etobs; the engine compiles it (:meth:`HybridSystem.compiled`), the scipy reference calls
 it as it is. :class:`BatchedSystem` is the same system with the runs on axis 0, the form
-of the batched numpy solver (:meth:`HybridSystem.batched` derives it).
+of the reference solver's model of an estimation problem (:meth:`HybridSystem.batched`
+derives it).
 """
 
 from __future__ import annotations
@@ -67,8 +68,9 @@ class HybridSystem:
         Names of the rules, used in messages and logs.
     n_flow : int, optional
         When given, only the entries ``0 .. n_flow-1`` change along flows; the others
-        (counters, buffers, identifiers) have zero derivative. The numpy solver then
-        leaves them out of its error norm, so that they do not dilute the tolerance.
+        (counters, buffers, identifiers) have zero derivative. The engine then leaves them
+        out of its stages, error norm and dense output (so that they do not dilute the
+        tolerance), and the flow need not write them.
     params : array_like, optional
         A parameter vector passed to every function as its last argument
         (``flow(t, x, p)``, ``guard(t, x, p)``, ``jump(k, t, x, p)``); numbers kept here
@@ -145,25 +147,15 @@ class HybridSystem:
                 self.n_rules,
                 n_params=self.params.size,
                 rule_names=self.rule_names,
+                n_flow=self.n_flow,
             )
         return self._compiled["engine"]
 
-    def batched(self, compiled: bool) -> BatchedSystem:
-        """The same system with the runs on axis 0, for the batched numpy solver.
-
-        ``compiled=True`` calls the engine's compiled functions in one compiled loop over
-        the rows; ``False`` calls the Python functions row by row.
-        """
-        if compiled:
-            fns = self.compiled().keep
-            run = _CompiledRows(fns, self.params)
-            flow, guard, jump = run.caller(0, self.n), run.caller(1, max(self.n_rules, 1)), run.jumper(self.n)
-            if not self.n_rules:
-                guard = _no_rules
-        else:
-            flow = _python_rows(self.call_flow, "flow", self.n)
-            guard = _python_rows(self.call_guard, "guard", self.n_rules)
-            jump = _python_jump(self.call_jump, self.n)
+    def batched(self) -> BatchedSystem:
+        """The same system with the runs on axis 0 (the reference's form), run by run in Python."""
+        flow = _python_rows(self.call_flow, "flow", self.n)
+        guard = _python_rows(self.call_guard, "guard", self.n_rules)
+        jump = _python_jump(self.call_jump, self.n)
         return BatchedSystem(
             n=self.n,
             n_rules=self.n_rules,
@@ -173,10 +165,6 @@ class HybridSystem:
             rule_names=self.rule_names,
             n_flow=self.n_flow,
         )
-
-
-def _no_rules(t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.empty((x.shape[0], 0))
 
 
 def _one(name: str, out: Any, n: int) -> np.ndarray:
@@ -206,46 +194,9 @@ def _python_jump(fn: Callable[..., Any], n: int) -> Callable[[int, np.ndarray, n
     return rows
 
 
-class _CompiledRows:
-    """Batched calls of the engine's compiled flow, guard and jump (one compiled loop)."""
-
-    def __init__(self, fns: tuple[Any, ...], params: np.ndarray) -> None:
-        self.fns = fns
-        self.params = np.array(params, dtype=float)
-
-    def _call(self, slot: int, k: int, n_out: int, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-        from etobs.compile.batch import batch_call
-        from etobs.compile.functions import describe_failure
-
-        B = x.shape[0]
-        out = np.empty((B, n_out))
-        empty = np.zeros((B, 0))
-        xs = np.ascontiguousarray(x, dtype=float)
-        st = batch_call(
-            self.fns[slot].address,
-            k,
-            np.ascontiguousarray(t, dtype=float),
-            xs,
-            empty,
-            empty,
-            empty,
-            self.params,
-            out,
-        )
-        if st != 1:
-            raise ModelError(describe_failure(self.fns[slot].name, st, n_out))
-        return out
-
-    def caller(self, slot: int, n_out: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-        return lambda t, x: self._call(slot, 0, n_out, t, x)
-
-    def jumper(self, n: int) -> Callable[[int, np.ndarray, np.ndarray], np.ndarray]:
-        return lambda k, t, x: self._call(2, int(k), n, t, x)
-
-
 @dataclass(frozen=True)
 class BatchedSystem:
-    """A hybrid system with the runs on axis 0 (the batched numpy solver's form).
+    """A hybrid system with the runs on axis 0 (the reference solver's form).
 
     ``flow(t, x) -> dx`` with ``t`` of shape ``(B,)`` and ``x``, ``dx`` of shape
     ``(B, n)``; ``guard(t, x) -> g`` of shape ``(B, n_rules)``; ``jump(k, t, x) -> x+``
