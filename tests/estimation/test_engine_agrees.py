@@ -53,7 +53,9 @@ def _input_node_and_network(d):
 
 def _copy_hold(d):
     nodes = [Node((0, 2), _dynamic(d["eps"], d["sigma"])), Node((1,), RelativeRule(rho=0.05, eps=d["delta"]))]
-    noise = Sinusoid(amplitude=[0.3 * d["delta"], 0.0, 0.1 * d["delta"]], omega=7.0)
+    # section 7.2's condition eps > gamma(2 m) holds: 4 (2 * 0.054)^2 eps < eps
+    m = np.sqrt(d["eps"])
+    noise = Sinusoid(amplitude=[0.05 * m, 0.0, 0.02 * m], omega=7.0)
     return chain(nodes, hold="innovation", m=noise)
 
 

@@ -14,7 +14,6 @@ from etobs.runtime.sampled_rule import SampledRule
 from etobs.runtime.sensor import SensorNode, run, udp_sender
 from etobs.runtime.server import ObserverServer
 from etobs.runtime.service import ObserverCore
-from etobs.runtime.spec import rule_spec
 
 KEYS = node_keys(b"loopback test secret", range(8))
 
@@ -134,7 +133,7 @@ def live(
             return send
 
         nodes = [
-            SensorNode(i, KEYS[i], SampledRule(rule_spec(nd.rule), period), sender(i))
+            SensorNode(i, KEYS[i], SampledRule(nd.rule.sensor_spec(), period), sender(i))
             for i, nd in enumerate(problem.nodes)
         ]
         srv.epoch = time.time() + 0.3  # once every sender is connected

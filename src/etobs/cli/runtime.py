@@ -140,7 +140,6 @@ def run_sensor(args: argparse.Namespace) -> int:
     from etobs.runtime.replay import sample_outputs
     from etobs.runtime.sampled_rule import SampledRule
     from etobs.runtime.sensor import SensorNode, SequenceStore, run, udp_sender
-    from etobs.runtime.spec import rule_spec
 
     dep = load(args.spec)
     pb = dep.problem()
@@ -161,7 +160,7 @@ def run_sensor(args: argparse.Namespace) -> int:
         node = SensorNode(
             args.node,
             derive_key(dep.secret(), args.node),
-            SampledRule(rule_spec(pb.nodes[args.node].rule), dep.period),
+            SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period),
             send,
             SequenceStore(state),
         )

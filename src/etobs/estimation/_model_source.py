@@ -24,11 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from etobs import formulas as fm
 from etobs.compile.functions import FunctionSpec
 from etobs.estimation import _network_jumps
 from etobs.estimation.calls import model_specs
+from etobs.formulas import CONSTANT, CUSTOM
 from etobs.model.fates import LINK_WIDTH
-from etobs.model.functions import CONSTANT, CUSTOM, LINEAR, POWER, QUADRATIC
 from etobs.model.rules import DYNAMIC, GENERALIZED, PERIODIC, RELATIVE, STATIC, EngineForm
 from etobs.model.signals import CONSTANT as SIG_CONSTANT
 from etobs.model.signals import FUNCTION as SIG_FUNCTION
@@ -59,12 +60,18 @@ P_SIGMA, P_C, P_B, P_EPS, P_RHO, P_PERIOD = range(len(RULE_NUMBERS))
 P_F = len(RULE_NUMBERS)
 RULE_W = P_F + 2 * len(KSLOTS)
 
-# eq. (14)-(15), (44)-(45) use these class-K functions; k1, k2 are their two numbers
-_KFORMS = {
-    LINEAR: "{k1} * {s}",
-    QUADRATIC: "{k1} * ({s} * {s})",
-    POWER: "{k1} * {s} ** {k2}",
-    CONSTANT: "{k1}",
+#: The rule arithmetic the generated code calls, by global name: the one implementation
+#: in :mod:`etobs.formulas` (numba compiles and inlines it).
+FORMULAS = {
+    "K_VALUE": fm.k_value,
+    "DYN_FLOW": fm.dynamic_flow,
+    "DYN_TRIGGER": fm.dynamic_trigger,
+    "ETA_RESET": fm.eta_reset,
+    "STATIC_TRIGGER": fm.static_trigger,
+    "REL_TRIGGER": fm.relative_trigger,
+    "PER_TRIGGER": fm.periodic_trigger,
+    "GEN_FLOW": fm.generalized_flow,
+    "GEN_TRIGGER": fm.generalized_trigger,
 }
 
 
@@ -237,6 +244,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     """
     pl, ob, lay = problem.plant, problem.observer, problem.layout
     src = ModelSource()
+    src.helpers.update(FORMULAS)
     nx, nz, ny, nu, nv = pl.n_x, ob.n_z, pl.n_y, pl.n_u, pl.n_v
     tp = src.put(pl.params)
     to = src.put(ob.params)
@@ -459,10 +467,10 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
             c.lines(_kcall(grp, A, "q[s0]", "av"))
             if kind == DYNAMIC:
                 c.lines(_kcall(grp, G, "e", "gv"))
-                c.line(f"gv = p[r + {P_C}] * gv")
+                c.line(f"dq[s0] = DYN_FLOW(gv, av, p[r + {P_C}])")
             else:
                 c.lines(_kcall(grp, GC, "e", "gv"))
-            c.line("dq[s0] = -av + gv")
+                c.line("dq[s0] = GEN_FLOW(gv, av)")
         c.dedent()
 
 
@@ -484,26 +492,26 @@ def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.indent()
         gi = f"g[{off} + i]" if off else "g[i]"
         if kind == PERIODIC:
-            c.line(f"{gi} = q[s0] - p[r + {P_PERIOD}]")
+            c.line(f"{gi} = PER_TRIGGER(q[s0], p[r + {P_PERIOD}])")
         elif kind == RELATIVE:
             c.line(f"e = {_norm(grp, False)}")
-            c.line(f"{gi} = e - p[r + {P_RHO}] * {_norm(grp, True)} - p[r + {P_EPS}]")
+            c.line(f"{gi} = REL_TRIGGER(e, {_norm(grp, True)}, p[r + {P_RHO}], p[r + {P_EPS}])")
         else:
             c.line(f"e = {_norm(grp, False)}")
             c.lines(_kcall(grp, G, "e", "gv"))
             if kind == STATIC:
-                c.line(f"{gi} = gv - p[r + {P_EPS}]")
+                c.line(f"{gi} = STATIC_TRIGGER(gv, p[r + {P_EPS}])")
             elif kind == DYNAMIC:
                 # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
                 c.lines(_kcall(grp, A, "q[s0]", "av"))
-                c.line(f"{gi} = gv - p[r + {P_SIGMA}] * av - p[r + {P_EPS}]")
+                c.line(f"{gi} = DYN_TRIGGER(gv, av, p[r + {P_SIGMA}], p[r + {P_EPS}])")
             else:
                 # eq. (45), read with >= (see GeneralizedRule):
                 # gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
                 c.lines(_kcall(grp, D, "q[s0]", "w"))
                 c.lines(_kcall(grp, GC, "e", "gc"))
                 c.lines(_kcall(grp, A, "q[s0]", "ac"))
-                c.line(f"{gi} = gv + w * gc - p[r + {P_SIGMA}] * w * ac - p[r + {P_EPS}]")
+                c.line(f"{gi} = GEN_TRIGGER(gv, w, gc, ac, p[r + {P_SIGMA}], p[r + {P_EPS}])")
         c.dedent()
 
 
@@ -527,7 +535,7 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
         for o in range(grp.first.size):
             c.line(f"q[a{o}] = work[b{o}]")
         if grp.first.form.kind in (DYNAMIC, GENERALIZED):
-            c.line(f"q[s0] = p[r + {P_B}] * q[s0]  # eta+ = b eta")
+            c.line(f"q[s0] = ETA_RESET(q[s0], p[r + {P_B}])")
         elif grp.first.form.kind == PERIODIC:
             c.line("q[s0] = 0.0")
         c.dedent()
@@ -623,4 +631,4 @@ def _kcall(grp: _Group, slot: int, s: str, out: str) -> list[str]:
     r = P_F + 2 * slot
     if kind == CUSTOM:
         return [f"{out} = float({glob}({s}))"]
-    return [f"{out} = {_KFORMS[kind].format(k1=f'p[r + {r}]', k2=f'p[r + {r + 1}]', s=s)}"]
+    return [f"{out} = K_VALUE({kind}, p[r + {r}], p[r + {r + 1}], {s})"]

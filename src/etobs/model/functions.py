@@ -4,7 +4,9 @@ All act elementwise on arrays of non-negative reals. ``Linear(a)`` is ``a*s`` an
 ``Quadratic(ell)`` is ``ell*s**2`` (the paper's ``𝔩_i s^2``); :class:`Custom` wraps any
 user function of one float after a sanity check that it is zero at zero and increasing.
 Each knows its engine form (:meth:`KFunction.engine_form`): a kind code and two numbers,
-or the user's function to compile.
+or the user's function to compile; the built-in ones are evaluated by
+:func:`etobs.formulas.k_value`, the one implementation the engine and the sensor nodes
+also run.
 """
 
 from __future__ import annotations
@@ -12,14 +14,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
-
-#: Kind codes of the engine form (see :mod:`etobs.estimation._model_source`).
-LINEAR, QUADRATIC, POWER, CUSTOM, CONSTANT = 0, 1, 2, 3, 4
+from etobs.formulas import CUSTOM, LINEAR, POWER, QUADRATIC, SENSOR_NAMES, k_value
 
 
 class KFunction(ABC):
@@ -37,18 +38,36 @@ class KFunction(ABC):
     def engine_form(self) -> tuple[int, float, float, Callable[[float], float] | None]:
         """``(kind, k1, k2, fn)``: the kind code, its two numbers, the function to compile or None."""
 
+    def sensor_spec(self, what: str) -> list[Any]:
+        """The function as a sensor node's rule spec gives it (``["linear", a]`` ...).
+
+        ``what`` names it in the error for a function a sensor node does not run.
+        """
+        kind, k1, k2, fn = self.engine_form()
+        names = {code: name for name, code in SENSOR_NAMES.items()}
+        if fn is not None or kind not in names:
+            raise InputError(
+                f"a sensor node runs Linear, Quadratic or Power functions; `{what}` is {type(self).__name__}"
+            )
+        return [names[kind], k1] if kind != POWER else [names[kind], k1, k2]
+
+
+class _Builtin(KFunction):
+    """A K-function of a kind :func:`etobs.formulas.k_value` evaluates."""
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        kind, k1, k2, _ = self.engine_form()
+        return k_value(kind, k1, k2, s)
+
 
 @dataclass(frozen=True)
-class Linear(KFunction):
+class Linear(_Builtin):
     """``a * s`` with ``a > 0``."""
 
     a: float
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "a", v.real("a", self.a, lower=0.0, lower_open=True))
-
-    def __call__(self, s: np.ndarray) -> np.ndarray:
-        return self.a * s
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.asarray(r) / self.a
@@ -61,16 +80,13 @@ class Linear(KFunction):
 
 
 @dataclass(frozen=True)
-class Quadratic(KFunction):
+class Quadratic(_Builtin):
     """``ell * s**2`` with ``ell > 0`` (the paper's ``𝔩 s²``)."""
 
     ell: float
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ell", v.real("ell", self.ell, lower=0.0, lower_open=True))
-
-    def __call__(self, s: np.ndarray) -> np.ndarray:
-        return self.ell * (s * s)
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.sqrt(np.asarray(r) / self.ell)
@@ -83,7 +99,7 @@ class Quadratic(KFunction):
 
 
 @dataclass(frozen=True)
-class Power(KFunction):
+class Power(_Builtin):
     """``k * s**p`` with ``k > 0`` and ``p > 0``."""
 
     k: float
@@ -92,9 +108,6 @@ class Power(KFunction):
     def __post_init__(self) -> None:
         object.__setattr__(self, "k", v.real("k", self.k, lower=0.0, lower_open=True))
         object.__setattr__(self, "p", v.real("p", self.p, lower=0.0, lower_open=True))
-
-    def __call__(self, s: np.ndarray) -> np.ndarray:
-        return self.k * np.power(s, self.p)
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         return np.power(np.asarray(r) / self.k, 1.0 / self.p)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from etobs import _validate as v
+from etobs import formulas as fm
 from etobs.model.functions import KFunction, Linear, as_kfunction
 from etobs.model.rules import GENERALIZED, EngineForm, EtaRule, _norm
 
@@ -88,14 +89,15 @@ class GeneralizedRule(EtaRule):
     def derivative(
         self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
     ) -> np.ndarray:
-        # eq. (44): eta' = -alpha_check(eta) + gamma_check(|e|)
-        return (-self.alpha_check(s[:, 0]) + self.gamma_check(_norm(e)))[:, None]
+        return fm.generalized_flow(self.gamma_check(_norm(e)), self.alpha_check(s[:, 0]))[:, None]  # (44)
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        # eq. (45): gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
+        # eq. (45), read with >= (see etobs.formulas.generalized_trigger)
         eta, r = s[:, 0], _norm(e)
         w = self.weight(eta)
-        return self.gamma(r) + w * self.gamma_check(r) - self.sigma * w * self.alpha_check(eta) - self.eps
+        return fm.generalized_trigger(
+            self.gamma(r), w, self.gamma_check(r), self.alpha_check(eta), self.sigma, self.eps
+        )
 
     def engine_form(self) -> EngineForm:
         numbers = {"sigma": self.sigma, "b": self.b, "eps": self.eps}

@@ -12,8 +12,14 @@ relative-threshold rule). It defines
 
 All methods are vectorized over runs: ``t`` has shape ``(B,)``, ``e`` and ``y``
 ``(B, n_yi)`` and ``s`` ``(B, n_state)``. ``y`` may be omitted (``None``) for every
-rule that does not read it. The same objects drive the simulator and the deployed
-sensor nodes; an input node (section 6.3) runs the same rules on ``e_u = ubar - u``.
+rule that does not read it. An input node (section 7.3) runs the same rules on
+``e_u = ubar - u``.
+
+Each rule knows its forms: these batched methods (for the scipy reference and for
+evaluating results), its engine form (:meth:`TriggerRule.engine_form`, compiled into the
+engine's model) and its sensor spec (:meth:`TriggerRule.sensor_spec`, the plain data a
+stdlib-only sensor node runs). All three compute with the one implementation of the
+formulas in :mod:`etobs.formulas`, so what you simulate is what you deploy.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from etobs import _validate as v
+from etobs import formulas as fm
 from etobs.errors import InputError
 from etobs.model.functions import KFunction, Linear, as_kfunction
 
@@ -94,6 +101,20 @@ class TriggerRule(ABC):
         """
         return None
 
+    def sensor_spec(self) -> dict[str, Any]:
+        """The rule as a sensor node's :class:`~etobs.runtime.sampled_rule.SampledRule` takes it.
+
+        Raises
+        ------
+        InputError
+            For a rule a sensor node does not run.
+
+        """
+        raise InputError(
+            "a sensor node runs DynamicRule, StaticRule, RelativeRule or PeriodicRule; "
+            f"got {type(self).__name__}"
+        )
+
 
 def engine_form_of(rule: TriggerRule) -> EngineForm | None:
     """``rule.engine_form()`` when the rule's own class defines it, else ``None``."""
@@ -126,8 +147,7 @@ class EtaRule(TriggerRule):
         return np.array([self.eta0])
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        # eq. (14): eta+ = b*eta at the node's own transmission
-        return self.b * s
+        return fm.eta_reset(s, self.b)  # eq. (14)
 
 
 @dataclass(frozen=True)
@@ -183,17 +203,26 @@ class DynamicRule(EtaRule):
     def derivative(
         self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
     ) -> np.ndarray:
-        # eq. (14): eta' = -alpha(eta) + c*gamma(|e|)
-        eta = s[:, 0]
-        return (-self.alpha(eta) + self.c * self.gamma(_norm(e)))[:, None]
+        return fm.dynamic_flow(self.gamma(_norm(e)), self.alpha(s[:, 0]), self.c)[:, None]  # eq. (14)
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        # eq. (15): transmit when gamma(|e|) >= sigma*alpha(eta) + eps
-        return self.gamma(_norm(e)) - self.sigma * self.alpha(s[:, 0]) - self.eps
+        return fm.dynamic_trigger(self.gamma(_norm(e)), self.alpha(s[:, 0]), self.sigma, self.eps)  # (15)
 
     def engine_form(self) -> EngineForm:
         numbers = {"sigma": self.sigma, "c": self.c, "b": self.b, "eps": self.eps}
         return EngineForm(DYNAMIC, numbers, (self.gamma, self.alpha, None, None))
+
+    def sensor_spec(self) -> dict[str, Any]:
+        return {
+            "kind": "dynamic",
+            "gamma": self.gamma.sensor_spec("gamma"),
+            "alpha": self.alpha.sensor_spec("alpha"),
+            "sigma": self.sigma,
+            "c": self.c,
+            "b": self.b,
+            "eps": self.eps,
+            "eta0": self.eta0,
+        }
 
 
 class StatelessRule(TriggerRule):
@@ -231,10 +260,13 @@ class StaticRule(StatelessRule):
         object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return self.gamma(_norm(e)) - self.eps
+        return fm.static_trigger(self.gamma(_norm(e)), self.eps)
 
     def engine_form(self) -> EngineForm:
         return EngineForm(STATIC, {"eps": self.eps}, (self.gamma, None, None, None))
+
+    def sensor_spec(self) -> dict[str, Any]:
+        return {"kind": "static", "gamma": self.gamma.sensor_spec("gamma"), "eps": self.eps}
 
 
 def send_on_delta(delta: float) -> StaticRule:
@@ -287,13 +319,16 @@ class PeriodicRule(TriggerRule):
         return np.ones_like(s)
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return s[:, 0] - self.period
+        return fm.periodic_trigger(s[:, 0], self.period)
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         return np.zeros_like(s)
 
     def engine_form(self) -> EngineForm:
         return EngineForm(PERIODIC, {"period": self.period})
+
+    def sensor_spec(self) -> dict[str, Any]:
+        return {"kind": "periodic", "period": self.period, "first": self.first}
 
 
 @dataclass(frozen=True)
@@ -329,7 +364,10 @@ class RelativeRule(StatelessRule):
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         if y is None:
             raise InputError("RelativeRule.trigger needs the current measurement `y`; got None")
-        return _norm(e) - self.rho * _norm(y) - self.eps
+        return fm.relative_trigger(_norm(e), _norm(y), self.rho, self.eps)
 
     def engine_form(self) -> EngineForm:
         return EngineForm(RELATIVE, {"rho": self.rho, "eps": self.eps})
+
+    def sensor_spec(self) -> dict[str, Any]:
+        return {"kind": "relative", "rho": self.rho, "eps": self.eps}

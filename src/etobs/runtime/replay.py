@@ -22,7 +22,6 @@ from etobs.hybrid.options import SaveAt
 from etobs.runtime.sampled_rule import SampledRule
 from etobs.runtime.sensor import SensorNode
 from etobs.runtime.service import ObserverCore
-from etobs.runtime.spec import rule_spec
 
 
 def sample_outputs(
@@ -63,7 +62,7 @@ def replay(
     core = ObserverCore(problem, keys, z0=z0, t0=float(t[0]), dt=dt)
     inbox: list[bytes] = []
     nodes = [
-        SensorNode(i, keys[i], SampledRule(rule_spec(nd.rule), period), inbox.append)
+        SensorNode(i, keys[i], SampledRule(nd.rule.sensor_spec(), period), inbox.append)
         for i, nd in enumerate(problem.nodes)
     ]
     xhat, packets = [], []

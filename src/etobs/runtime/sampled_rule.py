@@ -2,7 +2,7 @@
 
 A node reads its output every ``T`` seconds (samples ``t_k = k T``) and decides at each
 sample, on ``e_k = ybar - y(t_k)``, whether to send. The rules are given as plain data
-(:func:`etobs.runtime.spec.rule_spec` turns a simulator rule object into it), e.g.::
+(a simulator rule's :meth:`~etobs.model.rules.TriggerRule.sensor_spec` gives it), e.g.::
 
     {"kind": "dynamic", "gamma": ["quadratic", 5.0], "alpha": ["linear", 2.0],
      "sigma": 600.0, "c": 0.001, "b": 1.0, "eps": 10.0, "eta0": 10.0}
@@ -14,23 +14,27 @@ exactly over one period:
 
     eta_{k+1} = exp(-a T) eta_k + c gamma(|e_k|) (1 - exp(-a T)) / a.
 
-Other ``alpha`` are integrated with 20 classical Runge--Kutta substeps per period
-(local error ``O((T/20)^5)``). Against the continuous rule of the paper the sampled rule
-differs in two ways: it checks the trigger only at samples, so a transmission comes up to
-``T`` late and the gap can exceed the threshold by up to ``E_i T`` (``E_i`` a bound on
-``|d/dt y_i|``); and the filter sees ``gamma(|e|)`` held, not its continuous value, an
-error of at most ``c T sup |d/dt gamma(|e|)|`` per period in ``eta'``. Both vanish as
-``T -> 0``. The decision at a sample is: send when ``gamma(|e_k|) >= sigma alpha(eta_k) +
-eps`` (eq. (15)), then ``eta <- b eta`` (eq. (14)).
+Other ``alpha`` are integrated with 20 classical Runge--Kutta substeps per period (local
+error ``O((T/20)^5)``; :func:`etobs.formulas.eta_after_period`). The formulas are those
+the simulator runs (:mod:`etobs.formulas`, standard library only). Against the continuous
+rule of the paper the sampled rule differs in two ways: it checks the trigger only at
+samples, so a transmission comes up to ``T`` late and the gap can exceed the threshold by
+up to ``E_i T`` (``E_i`` a bound on ``|d/dt y_i|``); and the filter sees ``gamma(|e|)``
+held, not its continuous value, an error of at most ``c T sup |d/dt gamma(|e|)|`` per
+period in ``eta'``. Both vanish as ``T -> 0``. The decision at a sample is: send when
+``gamma(|e_k|) >= sigma alpha(eta_k) + eps`` (eq. (15)), then ``eta <- b eta`` (eq. (14)).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-KFn = Callable[[float], float]
+from etobs import formulas as fm
+
+#: A K-function as a node runs it: its kind and two numbers (:func:`etobs.formulas.k_value`).
+KFn = tuple[int, float, float]
 
 
 class RuleSpecError(ValueError):
@@ -59,11 +63,11 @@ def k_function(spec: Any, key: str) -> KFn:
             f"rule spec: `{key}` must be ['linear', a], ['quadratic', ell] or ['power', k, p]"
         )
     vals = [_number({"v": a}, "v", strict=True) for a in args]
-    if kind == "linear":
-        return lambda s, a=vals[0]: a * s
-    if kind == "quadratic":
-        return lambda s, ell=vals[0]: ell * s * s
-    return lambda s, k=vals[0], p=vals[1]: k * s**p
+    return fm.SENSOR_NAMES[kind], vals[0], vals[1] if len(vals) > 1 else 0.0
+
+
+def _k(fn: KFn, s: float) -> float:
+    return float(fm.k_value(fn[0], fn[1], fn[2], s))
 
 
 def _norm(v: Sequence[float]) -> float:
@@ -90,9 +94,7 @@ class SampledRule:
         self.kind = spec.get("kind")
         if self.kind == "dynamic":
             self.gamma = k_function(spec.get("gamma"), "gamma")
-            alpha = spec.get("alpha")
-            self.alpha = k_function(alpha, "alpha")
-            self.a = float(alpha[1]) if alpha[0] == "linear" else None
+            self.alpha = k_function(spec.get("alpha"), "alpha")
             self.sigma, self.c = _number(spec, "sigma"), _number(spec, "c")
             self.b, self.eps = _number(spec, "b"), _number(spec, "eps", strict=True)
             if self.b > 1:
@@ -132,31 +134,13 @@ class SampledRule:
                 self.count = 0
             return fire
         if self.kind == "static":
-            return self.gamma(r) >= self.eps
+            return fm.static_trigger(_k(self.gamma, r), self.eps) >= 0.0
         if self.kind == "relative":
-            return r >= self.rho * _norm(y) + self.eps
-        fire = self.gamma(r) >= self.sigma * self.alpha(self.eta) + self.eps  # eq. (15)
+            return fm.relative_trigger(r, _norm(y), self.rho, self.eps) >= 0.0
+        fire = fm.dynamic_trigger(_k(self.gamma, r), _k(self.alpha, self.eta), self.sigma, self.eps) >= 0.0
         if fire:
-            self.eta *= self.b  # eq. (14), jump
+            self.eta = fm.eta_reset(self.eta, self.b)  # eq. (14), jump
             r = 0.0
-        self.eta = self._flow(self.eta, self.c * self.gamma(r))
+        # eq. (14) over the period, gamma(|e|) held
+        self.eta = fm.eta_after_period(self.eta, self.c * _k(self.gamma, r), *self.alpha, self.period)
         return fire
-
-    def _flow(self, eta: float, forcing: float) -> float:
-        """``eta`` after one period of ``eta' = -alpha(eta) + forcing`` (forcing held)."""
-        T = self.period
-        if self.a is not None:  # exact for alpha(s) = a s
-            decay = math.exp(-self.a * T)
-            return decay * eta + forcing * (1.0 - decay) / self.a
-        h = T / 20
-
-        def f(s: float) -> float:
-            return -self.alpha(max(s, 0.0)) + forcing
-
-        for _ in range(20):
-            k1 = f(eta)
-            k2 = f(eta + 0.5 * h * k1)
-            k3 = f(eta + 0.5 * h * k2)
-            k4 = f(eta + h * k3)
-            eta += h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
-        return max(eta, 0.0)
