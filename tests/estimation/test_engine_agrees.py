@@ -87,7 +87,7 @@ numbers = st.fixed_dictionaries(
 )
 
 
-@settings(max_examples=9, deadline=None)
+@settings(max_examples=6, deadline=None)
 @given(st.sampled_from(sorted(STRUCTURES)), numbers)
 def test_engine_and_reference_agree_on_drawn_extension_problems(structure, d):
     pb = STRUCTURES[structure](d)

@@ -382,3 +382,28 @@ def test_unknown_keyword_is_a_type_error():
         SolverOptions(rtl=1e-6)  # type: ignore[call-arg]
     with pytest.raises(TypeError):
         solve(two_clocks(1, 1), [0, 0], (0, 1), tolerance=1e-3)  # type: ignore[call-arg]
+
+
+def test_entries_from_n_flow_on_are_constant_on_the_engine_or_the_run_says_why():
+    """``n_flow`` lets the engine leave entries out of the integration (a network's
+    packets); a flow that moves one anyway ends the run with model_error naming the
+    promise it broke, instead of freezing the entry silently. The reference integrates
+    every entry."""
+    promise_kept = HybridSystem(
+        n=2, n_rules=0, flow=lambda t, x: np.array([-x[0], 0.0]), guard=_no_guard, jump=_keep, n_flow=1
+    )
+    for backend in BACKENDS:
+        sol = solve(promise_kept, [1.0, 0.5], (0.0, 1.0), backend=backend)
+        assert sol.ok
+        np.testing.assert_allclose(sol.x_final[0], [np.exp(-1.0), 0.5], rtol=1e-9)
+    broken = HybridSystem(
+        n=2, n_rules=0, flow=lambda t, x: np.array([-x[0], 1.0]), guard=_no_guard, jump=_keep, n_flow=1
+    )
+    sol = solve(broken, [1.0, 0.0], (0.0, 1.0), backend="engine")
+    assert sol.status_labels() == ["model_error"]
+    assert sol.failures[0] == (
+        "`flow` returned a nonzero derivative for an entry from n_flow on (those must be constant along flows)"
+    )
+    np.testing.assert_array_equal(sol.x_final[0], [1.0, 0.0])  # no step was taken
+    ref = solve(broken, [1.0, 0.0], (0.0, 1.0), backend="scipy")
+    np.testing.assert_allclose(ref.x_final[0], [np.exp(-1.0), 1.0], rtol=1e-9)

@@ -11,7 +11,9 @@ tuple of floats (no allocation: the fastest form for functions called very often
 * ``OK`` (1): the result was written to ``out``;
 * ``BAD_SHAPE`` (2): the function returned an array of another length;
 * ``RAISED`` (0): the function raised (numba prints the exception; the C wrapper
-  returns zero).
+  returns zero);
+* ``BEYOND_N_FLOW`` (3): set by the engine, not the wrapper: a system's flow moved an
+  entry that its ``n_flow`` says is constant along flows.
 
 The machine code is cached on disk under a hash of the function's content (see
 :mod:`etobs.compile.cache`): a new process, a sweep worker, or a function named as
@@ -29,9 +31,15 @@ from typing import Any
 from etobs.compile.fingerprint import _names, fingerprint
 from etobs.errors import ModelError
 
-RAISED, OK, BAD_SHAPE = 0, 1, 2
+RAISED, OK, BAD_SHAPE, BEYOND_N_FLOW = 0, 1, 2, 3
 #: Failure codes as words, for messages.
-FAILURES = {RAISED: "raised an exception (numba printed it above)", BAD_SHAPE: "returned the wrong shape"}
+FAILURES = {
+    RAISED: "raised an exception (numba printed it above)",
+    BAD_SHAPE: "returned the wrong shape",
+    BEYOND_N_FLOW: (
+        "returned a nonzero derivative for an entry from n_flow on (those must be constant along flows)"
+    ),
+}
 
 
 def describe_failure(name: str, status: int, n_out: int | None = None) -> str:

@@ -449,8 +449,7 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
         c.line(f"for ii in range({ny}):")
         c.line(f"    work[{w['ybar_o']} + ii] = work[{w['yhat']} + ii] + q[{at.yb0} + ii]")
     c.call("F_O", f"t, {z}, {ubar}, {ybar}, {yhat}", at.po, f"dq[{at.z0}:{at.z0 + nz}]", nz, S_FO)  # eq. (7)
-    first_held = at.yb0
-    c.line(f"for ii in range({first_held}, {n_flow}):")
+    c.line(f"for ii in range({at.yb0}, {n_flow}):")
     c.line("    dq[ii] = 0.0  # held values and rule states; the rules' flows follow")
     _prelude(c, at, flow=True)
     for grp in groups:

@@ -64,6 +64,8 @@ F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
 I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW = 0, 1, 2, 3, 4, 5
 #: Slots of the system's functions in failure codes.
 FLOW, GUARD, JUMP = 1, 2, 3
+#: The flow's failure code when it moves an entry that n_flow says is constant.
+FLOW_BEYOND_N_FLOW = 16 * FLOW + 3  # etobs.compile.functions.BEYOND_N_FLOW
 #: The ``k`` that flow and guard are called with (a jump gets its rule, >= 0), so that
 #: one C function may serve as all three (the estimation model does: one compile).
 K_FLOW, K_GUARD = -1, -2

@@ -19,6 +19,7 @@ from etobs.hybrid._kernel import (
     F_MAX_STEP,
     F_RTOL,
     F_XTOL,
+    FLOW_BEYOND_N_FLOW,
     I_KEEP_STEPS,
     I_MAX_JUMPS,
     I_MAX_STEPS,
@@ -49,6 +50,7 @@ from etobs.hybrid._kernel import (
     load_i64,
     rows_at,
     run_args,
+    store_i64,
     vector_at,
 )
 
@@ -277,6 +279,10 @@ def _solve_one(
             for q in range(nf):
                 yi[q] = x[q] + hh * dy[q]
             flow(ti, yi, p, args, kp + 8 * n * i)
+        # the flow broke its n_flow promise (at the step's two ends: a flow that moves those
+        # entries moves them there too, and a check of every stage would cost a step's sums)
+        if nf < n and not (_tail_zero(K, 0, nf) and _tail_zero(K, s, nf)):
+            store_i64(args[6], FLOW_BEYOND_N_FLOW)
         # error norm (see Tableau.error_norm)
         _comb(TE, K, s + 1, dy, nf)
         e5 = 0.0
@@ -420,6 +426,15 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
     if not _all_finite(f):
         return NONFINITE, j, nlog, narc
     return RUNNING, j, nlog, narc
+
+
+@jit
+def _tail_zero(K, r, nf):
+    """Whether row ``r`` of ``K`` is zero from entry ``nf`` on."""
+    for i in range(nf, K.shape[1]):
+        if K[r, i] != 0.0:
+            return False
+    return True
 
 
 @jit

@@ -70,7 +70,8 @@ class HybridSystem:
         When given, only the entries ``0 .. n_flow-1`` change along flows; the others
         (counters, buffers, identifiers) have zero derivative. The engine then leaves them
         out of its stages, error norm and dense output (so that they do not dilute the
-        tolerance), and the flow need not write them.
+        tolerance), and the flow need not write them; a flow that moves one anyway ends
+        the run with ``model_error``.
     params : array_like, optional
         A parameter vector passed to every function as its last argument
         (``flow(t, x, p)``, ``guard(t, x, p)``, ``jump(k, t, x, p)``); numbers kept here

@@ -57,7 +57,7 @@ class _Builtin(KFunction):
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         kind, k1, k2, _ = self.engine_form()
-        return k_value(kind, k1, k2, s)
+        return k_value(kind, k1, k2, np.asarray(s, dtype=float))
 
 
 @dataclass(frozen=True)
