@@ -21,7 +21,6 @@ import numpy as np
 
 from etobs import SaveAt, SolverOptions, simulate
 from etobs.estimation import transmission_counts
-from etobs.experiments.systems import build_problem
 from etobs.experiments.table1 import table1_spec
 
 
@@ -49,12 +48,10 @@ def main() -> None:
     x0 = spec.initial_states.draw(runs)
     save = SaveAt(steps=False)
     stats = {rt: {"equal": 0, "runs": 0, "gaps": [], "time": 0.0, "worst": (0.0, None)} for rt in args.rtol}
-    simulate(
-        build_problem(spec, 0, 0), x0[:1], 0.01, save=save, backend=backend
-    )  # compile outside the timing
+    simulate(spec.problem(0), x0[:1], 0.01, save=save, backend=backend)  # compile outside the timing
     for row in rows:
         for sc in range(len(spec.scenarios)):
-            problem = build_problem(spec, row, sc)
+            problem = spec.problem(row * len(spec.scenarios) + sc)
             tight = SolverOptions(rtol=args.reference, atol=args.reference)
             ref = simulate(problem, x0, t_end, options=tight, save=save, backend=backend)
             ref_counts = transmission_counts(ref)

@@ -62,8 +62,8 @@ delay = 0.02
 
 
 @pytest.fixture(scope="module")
-def comparison():
-    return compare(parse_compare_spec(SPEC))
+def comparison(tmp_path_factory):
+    return compare(parse_compare_spec(SPEC), tmp_path_factory.mktemp("cmp"), executor="serial")
 
 
 def test_every_rule_runs_on_every_network_from_the_same_states(comparison):
@@ -114,23 +114,70 @@ def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
     spec = tmp_path / "cmp.toml"
     spec.write_text(TOML)
     out = tmp_path / "out"
-    assert main(["compare", str(spec), "--out", str(out)]) == 0
+    serial = ["--executor", "serial", "--no-progress"]
+    assert main(["compare", str(spec), "--out", str(out), *serial]) == 0
     printed = capsys.readouterr()
     assert "| dynamic | ideal | 2/2 |" in printed.out
-    assert "[4/4] periodic / lossy" in printed.err
-    for name in ("comparison.md", "comparison.json", "tradeoff.png"):
+    assert "[4/4] periodic / lossy: 2/2 runs completed" in printed.err
+    for name in ("comparison.md", "comparison.json", "tradeoff.png", "spec.json"):
         assert (out / name).is_file()
     data = json.loads((out / "comparison.json").read_text())
     assert [e["rule"] for e in data["entries"]] == ["dynamic", "periodic", "dynamic", "periodic"]
-    assert len(list((out / "entries").glob("*.json"))) == 4
-    # a rerun reuses the finished entries and gives the same table
+    assert [e["runs"] for e in data["entries"]] == [[0, 1]] * 4
+    chunks = sorted((out / "chunks").glob("*.json"))
+    assert len(chunks) == 4  # one chunk of 2 runs per entry (chunk_size 20)
+    # a rerun reuses every stored run and gives the same table
     before = (out / "comparison.md").read_text()
-    assert main(["compare", str(spec), "--out", str(out), "--no-plot"]) == 0
-    assert "reusing 4 of 4 entries" in capsys.readouterr().err
+    assert main(["compare", str(spec), "--out", str(out), "--no-plot", *serial]) == 0
+    err = capsys.readouterr().err
+    assert "reused 8 of 8 runs finished earlier" in err and "[1/4]" not in err
     assert (out / "comparison.md").read_text() == before
-    # another number of runs is another set of entries
-    assert main(["compare", str(spec), "--out", str(out), "--runs", "1", "--no-plot"]) == 0
-    assert "reusing" not in capsys.readouterr().err
+    # an interrupted comparison (chunks missing) computes only what is missing
+    chunks[0].unlink()
+    chunks[3].unlink()
+    assert main(["compare", str(spec), "--out", str(out), "--no-plot", "--chunk-size", "1", *serial]) == 0
+    err = capsys.readouterr().err
+    assert "reused 4 of 8 runs" in err and err.count("runs completed") == 2
+    assert (out / "comparison.md").read_text() == before
+    # more runs reuse the first ones
+    assert main(["compare", str(spec), "--out", str(out), "--runs", "3", "--no-plot", *serial]) == 0
+    assert "reused 8 of 12 runs" in capsys.readouterr().err
+
+
+def test_process_pool_and_dask_give_the_same_table(tmp_path, dask_cluster):
+    spec = parse_compare_spec({**SPEC, "rules": SPEC["rules"][:2]})
+    serial = compare(spec, tmp_path / "serial", executor="serial", chunk=2)
+    pooled = compare(spec, tmp_path / "pool", executor="process", workers=2, chunk=1)
+    dask = compare(spec, tmp_path / "dask", executor="dask", scheduler=dask_cluster.scheduler_address)
+    assert serial.complete and pooled.complete and dask.complete
+    assert serial.markdown() == pooled.markdown() == dask.markdown()
+    assert (pooled.computed, dask.computed) == (spec.n_runs, spec.n_runs) == (12, 12)
+
+
+def test_a_failing_chunk_is_reported_and_the_rest_runs(tmp_path, monkeypatch, capsys):
+    import etobs.experiments.runner as runner
+    from etobs import StaticRule
+
+    spec = parse_compare_spec({**SPEC, "rules": SPEC["rules"][:2], "networks": SPEC["networks"][:1]})
+    real = runner.simulate
+
+    def flaky(problem, x0, *a, run_ids, **kw):
+        if isinstance(problem.nodes[0].rule, StaticRule):
+            raise RuntimeError("the static entry fails on purpose")
+        return real(problem, x0, *a, run_ids=run_ids, **kw)
+
+    monkeypatch.setattr(runner, "simulate", flaky)
+    res = compare(spec, tmp_path, executor="serial", on_entry=lambda e: print(e.rule, len(e.runs)))
+    assert not res.complete
+    assert [len(e.runs) for e in res.entries] == [3, 0]
+    assert capsys.readouterr().out.splitlines() == ["dynamic 3", "static 0"]
+    assert len(res.failures) == 1 and res.failures[0]["where"] == "rule 'static' on network 'ideal'"
+    md = res.markdown()
+    assert "| static | ideal | 0/3 |" in md
+    assert "Failed: rule 'static' on network 'ideal', runs 0..2: RuntimeError: the static entry fails" in md
+    monkeypatch.setattr(runner, "simulate", real)
+    again = compare(spec, tmp_path, executor="serial")
+    assert again.complete and (again.computed, again.reused) == (3, 3)
 
 
 @pytest.mark.parametrize(
@@ -157,6 +204,11 @@ def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
         ({"networks": [{"name": "n", "delay": {"uniform": [1]}}]}, r"uniform` must be a list of 2 numbers"),
         ({"execution": {"backend": "gpu"}}, r"`execution.backend` must be one of"),
         ({"horizon": {"t_end": -1}}, r"`horizon.t_end` must be > 0"),
+        # the tables shared with a sweep spec: the same parser, the same messages
+        ({"name": "my rules"}, r"`name` must be a non-empty name of letters, digits, '_' or '-'"),
+        ({"execution": {"chunk_size": 0}}, r"`execution.chunk_size` must be >= 1; got 0"),
+        ({"system": {"factory": "robot_arm", "fixed": {}}}, r"unknown key `system.fixed`; allowed keys"),
+        ({"metrics": {"error_window": [6.0, 9.0]}}, r"`metrics.error_window` must lie within \[0, horizon"),
     ],
 )
 def test_spec_errors_name_the_key(change, message):
@@ -164,7 +216,7 @@ def test_spec_errors_name_the_key(change, message):
         parse_compare_spec({**SPEC, **change})
 
 
-def test_auto_backend_is_decided_per_entry_by_simulate():
+def test_auto_backend_is_decided_per_entry_by_simulate(tmp_path):
     # the engine runs every entry, networks too; the entry records what ran
     spec = parse_compare_spec(
         {
@@ -177,22 +229,23 @@ def test_auto_backend_is_decided_per_entry_by_simulate():
         }
     )
     assert spec.backend == "auto"
-    backends = {e.network: e.backend for e in compare(spec).entries}
+    backends = {e.network: e.backend for e in compare(spec, tmp_path, executor="serial").entries}
     assert backends == {"ideal": "engine", "lossy": "engine"}
     engine_spec = parse_compare_spec({**SPEC, "execution": {"backend": "numba"}})
     assert engine_spec.backend == "engine"  # the earlier name
 
 
-def test_rule_errors_at_run_time_name_the_entry_and_node():
+def test_rule_errors_at_run_time_name_the_entry_and_node(tmp_path):
     spec = parse_compare_spec({**SPEC, "rules": [{"name": "bad", "kind": "periodic", "period": [0.1, 0.2]}]})
     with pytest.raises(SpecError, match=r"`rules\['bad'\].period` has 2 values but the problem has 1 nodes"):
-        compare(spec)
+        compare(spec, tmp_path, executor="serial")
     rules = [{"name": "fine", "kind": "base"}, {"name": "neg", "kind": "relative", "rho": -1, "eps": 1}]
     spec = parse_compare_spec({**SPEC, "rules": rules})
     ran = []
     with pytest.raises(SpecError, match=r"`rules\['neg'\]`, node 0: `rho` must be > 0; got -1"):
-        compare(spec, on_entry=lambda key, e: ran.append(key))
+        compare(spec, tmp_path, executor="serial", on_entry=ran.append)
     assert ran == []  # every entry is checked before the first one runs
+    assert not list((tmp_path / "chunks").glob("*.json"))
 
 
 def test_cli_bad_spec_exits_2(tmp_path, capsys):

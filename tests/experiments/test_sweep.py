@@ -11,7 +11,7 @@ from etobs import simulate
 from etobs.errors import InputError
 from etobs.experiments import parse_spec, run_sweep
 from etobs.experiments.spec import SpecError
-from etobs.experiments.systems import build_problem, check_factory, resolve_factory
+from etobs.experiments.systems import resolve_factory
 
 from .conftest import FACTORY, raw_spec
 
@@ -84,7 +84,7 @@ def test_factory_errors_name_the_problem(tmp_path):
     with pytest.raises(
         SpecError, match=r"parameter `q` \(row 0, scenario 'coarse'\) is not an argument of the factory"
     ):
-        check_factory(parse_spec(raw_spec(rows=[{"q": 1}])))
+        parse_spec(raw_spec(rows=[{"q": 1}])).check()
     with pytest.raises(SpecError, match=r"`system.factory` = 'pendulum' is neither a registered example"):
         resolve_factory("pendulum")
     with pytest.raises(SpecError, match=r"`system.factory`: cannot import 'no_such_module'"):
@@ -93,7 +93,7 @@ def test_factory_errors_name_the_problem(tmp_path):
         resolve_factory(FACTORY.replace(":scalar", ":nothing"))
     bad = parse_spec(raw_spec(system={"factory": "builtins:dict"}))
     with pytest.raises(SpecError, match=r"returned dict, not an EstimationProblem"):
-        build_problem(bad, 0, 0)
+        bad.problem(0)
 
 
 def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
@@ -154,28 +154,19 @@ def test_a_killed_driver_resumes_and_every_run_is_present_once(tmp_path):
     assert not list((out / "chunks").glob(".*tmp"))  # no half-written files left visible
 
 
-def test_dask_executor_gives_the_same_numbers(tiny, tmp_path):
-    distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
-    # A scheduler and one worker in this process, listening on 127.0.0.1 only.
-    with distributed.LocalCluster(
-        n_workers=1,
-        threads_per_worker=2,
-        processes=False,
-        protocol="tcp://",
-        host="127.0.0.1",
-        dashboard_address=None,
-    ) as cluster:
-        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
-        by_address = run_sweep(
-            tiny,
-            tmp_path / "addr",
-            executor="dask",
-            scheduler=cluster.scheduler_address,
-            chunk=3,
-            progress=False,
-        )
-        with distributed.Client(cluster) as client:
-            by_client = run_sweep(tiny, tmp_path / "client", executor="dask", client=client, progress=False)
+def test_dask_executor_gives_the_same_numbers(tiny, tmp_path, dask_cluster):
+    import distributed
+
+    by_address = run_sweep(
+        tiny,
+        tmp_path / "addr",
+        executor="dask",
+        scheduler=dask_cluster.scheduler_address,
+        chunk=3,
+        progress=False,
+    )
+    with distributed.Client(dask_cluster) as client:
+        by_client = run_sweep(tiny, tmp_path / "client", executor="dask", client=client, progress=False)
     assert by_address.complete and by_client.complete
     run_sweep(tiny, tmp_path / "serial", executor="serial", progress=False)
     assert read_runs(tmp_path / "addr") == read_runs(tmp_path / "serial") == read_runs(tmp_path / "client")
@@ -203,7 +194,7 @@ def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_
     from etobs.experiments.store import ResultStore, task_key
 
     store = ResultStore(tmp_path)
-    key = task_key(failing, 0, 0)
+    key = task_key(failing, 0)
     ok_records = run_sweep(
         parse_spec(raw_spec(rows=[{"k": 1.0}])), tmp_path / "ok", executor="serial", progress=False
     ).runs
@@ -289,11 +280,11 @@ def test_keys_ignore_how_numbers_are_written(tmp_path):
         )
     )
     c = parse_spec(raw_spec(rows=[{}], system={"factory": FACTORY, "fixed": {"k": 1.0}}))
-    assert task_key(a, 0, 0) != task_key(b, 0, 0)  # the metrics differ (defaults vs tiny's)
+    assert task_key(a, 0) != task_key(b, 0)  # the metrics differ (defaults vs tiny's)
     b2 = parse_spec(
         raw_spec(rows=[{"k": 1.0}], initial_states={"low": [-1.0], "high": [1.0], "runs": 9, "seed": 7})
     )
-    assert task_key(a, 0, 0) == task_key(b2, 0, 0) == task_key(c, 0, 0)
+    assert task_key(a, 0) == task_key(b2, 0) == task_key(c, 0)
 
 
 def test_unreachable_dask_scheduler_is_an_input_error(tiny, tmp_path):
@@ -368,4 +359,4 @@ def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_
     assert one.complete and len(one.runs) == 10
     assert read_runs(tmp_path / "one") == read_runs(tmp_path / "many")
     with pytest.raises(InputError, match=r"`run_ids` must be 2 non-negative integers"):
-        simulate(build_problem(spec, 0, 0), [[0.5], [0.2]], 1.0, run_ids=[0])
+        simulate(spec.problem(0), [[0.5], [0.2]], 1.0, run_ids=[0])

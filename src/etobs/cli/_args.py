@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -52,3 +53,54 @@ def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, An
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
+
+
+def execution_args(p: argparse.ArgumentParser) -> None:
+    """The options of commands that run an experiment (``sweep``, ``reproduce``, ``compare``)."""
+    from etobs.experiments.executors import EXECUTORS
+
+    p.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        default=None,
+        help="where chunks run (default: process, or dask with --scheduler)",
+    )
+    p.add_argument("--workers", type=positive_int, default=None, help="local processes (default: cores)")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    p.add_argument("--chunk-size", type=positive_int, default=None, help="runs per chunk")
+    p.add_argument("--runs", type=positive_int, default=None, help="initial states (overrides the spec)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the initial states (overrides spec)")
+    p.add_argument(
+        "--backend",
+        type=backend,
+        default=None,
+        help=f"solver, overriding the spec's execution.backend: {BACKEND_HELP}",
+    )
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="progress line on stderr (default: when stderr is a terminal)",
+    )
+
+
+def execution(spec: Any, args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    """The experiment ``spec`` with the overrides of :func:`execution_args`, and how to run it."""
+    from etobs.errors import InputError
+
+    if args.runs is not None or args.seed is not None:
+        spec = spec.with_runs(args.runs, args.seed)
+    if args.backend is not None:
+        spec = spec.with_backend(args.backend)
+    executor = args.executor or ("dask" if args.scheduler else "process")
+    if args.scheduler and executor != "dask":
+        raise InputError(f"--scheduler needs --executor dask; got --executor {executor}")
+    progress = sys.stderr.isatty() if args.progress is None else args.progress
+    how = {
+        "executor": executor,
+        "workers": args.workers,
+        "scheduler": args.scheduler,
+        "chunk": args.chunk_size,
+        "progress": progress,
+    }
+    return spec, how

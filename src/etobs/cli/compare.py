@@ -1,8 +1,10 @@
 """``etobs compare SPEC``: several triggering rules (and networks) side by side.
 
+Runs through the same pipeline as ``etobs sweep`` (executors, chunk store, resume).
 Writes into ``--out``: ``comparison.md`` (the table), ``comparison.json`` (every run's
-figures), ``tradeoff.png`` (transmissions against error) and ``entries/`` (each entry
-as soon as it finishes; a rerun with the same spec and folder reuses them).
+figures), ``tradeoff.png`` (transmissions against error), ``spec.json`` and ``chunks/``
+(each chunk of runs as soon as it finishes; a rerun with the same spec and folder
+computes only what is missing).
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from etobs.cli._args import load_toml, positive_int
-from etobs.experiments.compare import Comparison, EntryResult, compare, entry_key
+from etobs.cli._args import execution, execution_args, load_toml
+from etobs.experiments.compare import Comparison, EntryResult, compare
 from etobs.experiments.compare_spec import CompareSpec, parse_compare_spec
 from etobs.experiments.store import atomic_write
 
@@ -27,14 +29,14 @@ def add_parser(sub: Any) -> None:
         "compare",
         help="compare triggering rules and network settings on the same initial states",
         description="Run every rule of SPEC on every network of SPEC; write a Markdown table, "
-        "JSON figures and a trade-off plot.",
+        "JSON figures and a trade-off plot. Rerunning with the same --out resumes.",
     )
     p.add_argument("spec", metavar="SPEC", help=f"TOML file, or a packaged spec: {', '.join(PACKAGED)}")
     p.add_argument(
         "--out", type=Path, default=Path("compare-out"), help="output folder (default compare-out)"
     )
-    p.add_argument("--runs", type=positive_int, default=None, help="override initial_states.runs")
     p.add_argument("--no-plot", action="store_true", help="skip tradeoff.png")
+    execution_args(p)
     p.set_defaults(func=run)
 
 
@@ -44,49 +46,35 @@ def load(name: str) -> CompareSpec:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the comparison, persisting each entry as it finishes; print the table."""
-    spec = load(args.spec).with_runs(args.runs)
-    out: Path = args.out
-    entries = out / "entries"
-    done = _finished(spec, entries)
-    total = len(spec.rules) * len(spec.networks)
-    if done:
-        print(f"reusing {len(done)} of {total} entries finished earlier in {entries}", file=sys.stderr)
-    count = [len(done)]
+    """Run the comparison, persisting each chunk as it finishes; print the table."""
+    spec, how = execution(load(args.spec), args)
+    row = {(r.name, n.name): k + 1 for k, (r, n) in enumerate(spec.entries)}
 
-    def save(key: str, e: EntryResult) -> None:
-        atomic_write(entries / f"{key}.json", json.dumps(e.to_json()))
-        count[0] += 1
+    def report(e: EntryResult) -> None:  # [row of the table / rows]
         ok = sum(s == "completed" for s in e.status)
         print(
-            f"[{count[0]}/{total}] {e.rule} / {e.network}: {ok}/{len(e.status)} runs completed "
+            f"[{row[(e.rule, e.network)]}/{spec.n_groups}] {e.rule} / {e.network}: "
+            f"{ok}/{spec.initial_states.runs} runs completed "
             f"in {e.seconds:.1f} s ({e.backend})",
             file=sys.stderr,
             flush=True,
         )
 
-    result = compare(spec, done=done, on_entry=save)
-    _write(result, out, plot=not args.no_plot)
+    result = compare(spec, args.out, on_entry=report, **how)
+    if result.reused:
+        print(
+            f"reused {result.reused} of {spec.n_runs} runs finished earlier in {result.out}/chunks",
+            file=sys.stderr,
+        )
+    _write(result, plot=not args.no_plot)
     print(result.markdown())
-    print(f"written to {out}/: comparison.md, comparison.json" + ("" if args.no_plot else ", tradeoff.png"))
-    return 0
+    files = "comparison.md, comparison.json" + ("" if args.no_plot else ", tradeoff.png")
+    print(f"written to {result.out}/: {files}")
+    return 0 if result.complete else 1
 
 
-def _finished(spec: CompareSpec, folder: Path) -> dict[str, EntryResult]:
-    done = {}
-    for network in spec.networks:
-        for rule in spec.rules:
-            key = entry_key(spec, rule, network)
-            path = folder / f"{key}.json"
-            if path.is_file():
-                try:
-                    done[key] = EntryResult.from_json(json.loads(path.read_text()))
-                except (ValueError, KeyError, TypeError):  # a damaged file is recomputed
-                    continue
-    return done
-
-
-def _write(result: Comparison, out: Path, *, plot: bool) -> None:
+def _write(result: Comparison, *, plot: bool) -> None:
+    out = result.out
     atomic_write(out / "comparison.md", f"# {result.spec.name}\n\n" + result.markdown())
     atomic_write(out / "comparison.json", json.dumps(result.to_json(), indent=1))
     if plot:

@@ -4,36 +4,36 @@
 :meth:`~Comparison.table` has one row per (rule, network) with, side by side:
 transmissions per node in the window, the maximum estimation error on the error window,
 the minimum inter-event time per node and, with a network, the share of packets the
-observer never applied. Entries finished earlier can be passed back in (``done``) so an
-interrupted comparison resumes without recomputing them.
+observer never applied.
+
+A comparison is an experiment like a sweep (its groups are the entries), so it runs
+through the same pipeline (:mod:`etobs.experiments.pipeline`): chunks on this process, a
+process pool or a Dask cluster, each stored in ``out/chunks`` as it finishes; a rerun on
+the same folder computes only what is missing.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from etobs.errors import InputError
-from etobs.estimation import max_estimation_error, min_inter_event_time, simulate, transmission_counts
-from etobs.estimation.result import EstimationResult
-from etobs.examples.registry import resolve_factory
-from etobs.experiments.compare_spec import CompareSpec, NetworkEntry, RuleEntry
-from etobs.experiments.spec import SpecError
-from etobs.hybrid.options import SaveAt
+from etobs.experiments.compare_spec import CompareSpec
+from etobs.experiments.pipeline import run_groups, stored
 
 
 @dataclass(frozen=True)
 class EntryResult:
-    """Per-run metrics of one (rule, network) entry; arrays have one row per run.
+    """Per-run metrics of one (rule, network) entry; arrays have one row per stored run.
 
     Attributes
     ----------
+    runs : tuple of int
+        The runs present (all of ``0 .. runs-1`` unless a chunk failed).
     transmissions : ndarray of int, shape (B, C)
         Transmissions of each node (output nodes, then input nodes) in the window.
     error : ndarray, shape (B,)
@@ -43,12 +43,15 @@ class EntryResult:
     not_applied, packets : ndarray of int, shape (B, C) or None
         Packets sent but never applied by the observer (lost, dropped, stale or still in
         flight), and all packets sent, over the whole run; ``None`` on the ideal network.
+    seconds : float
+        Wall time of the entry's runs (the solver's, summed over chunks).
 
     """
 
     rule: str
     network: str
     backend: str
+    runs: tuple[int, ...]
     status: tuple[str, ...]
     transmissions: np.ndarray
     error: np.ndarray
@@ -56,6 +59,32 @@ class EntryResult:
     not_applied: np.ndarray | None
     packets: np.ndarray | None
     seconds: float
+
+    @classmethod
+    def from_records(
+        cls, rule: str, network: str, records: Sequence[dict[str, Any]], n_channels: int
+    ) -> EntryResult:
+        """The entry from its stored run records (:func:`~etobs.experiments.runner.run_task`)."""
+        recs = sorted(records, key=lambda r: r["run"])
+
+        def table(name: str, dtype: Any) -> np.ndarray:
+            rows = [[np.nan if v is None else v for v in r[name]] for r in recs]
+            return np.array(rows, dtype=dtype).reshape(len(recs), n_channels)
+
+        networked = bool(recs) and recs[0]["packets"] is not None
+        return cls(
+            rule=rule,
+            network=network,
+            backend=", ".join(sorted({r["backend"] for r in recs})) or "none",
+            runs=tuple(int(r["run"]) for r in recs),
+            status=tuple(r["status"] for r in recs),
+            transmissions=table("transmissions", np.int64),
+            error=np.array([np.nan if r["error"] is None else r["error"] for r in recs], dtype=float),
+            min_inter_event_time=table("min_inter_event_time", float),
+            not_applied=table("not_applied", np.int64) if networked else None,
+            packets=table("packets", np.int64) if networked else None,
+            seconds=float(sum(r["seconds"] for r in recs)),
+        )
 
     def to_json(self) -> dict[str, Any]:
         """Plain values (NaN as ``None``)."""
@@ -69,6 +98,7 @@ class EntryResult:
             "rule": self.rule,
             "network": self.network,
             "backend": self.backend,
+            "runs": list(self.runs),
             "status": list(self.status),
             "transmissions": self.transmissions.tolist(),
             "error": [None if not np.isfinite(v) else float(v) for v in self.error],
@@ -78,42 +108,50 @@ class EntryResult:
             "seconds": self.seconds,
         }
 
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> EntryResult:
-        """Inverse of :meth:`to_json`."""
-
-        def arr(x: Any, dtype: Any = float) -> np.ndarray:
-            return np.array([[np.nan if v is None else v for v in row] for row in x], dtype=dtype)
-
-        return cls(
-            rule=d["rule"],
-            network=d["network"],
-            backend=d["backend"],
-            status=tuple(d["status"]),
-            transmissions=np.array(d["transmissions"], dtype=np.int64),
-            error=np.array([np.nan if v is None else v for v in d["error"]], dtype=float),
-            min_inter_event_time=arr(d["min_inter_event_time"]),
-            not_applied=None if d["not_applied"] is None else np.array(d["not_applied"], dtype=np.int64),
-            packets=None if d["packets"] is None else np.array(d["packets"], dtype=np.int64),
-            seconds=float(d["seconds"]),
-        )
-
 
 @dataclass(frozen=True)
 class Comparison:
-    """Result of :func:`compare`: one :class:`EntryResult` per (rule, network)."""
+    """Result of :func:`compare`: one :class:`EntryResult` per (rule, network).
+
+    Attributes
+    ----------
+    spec : CompareSpec
+    out : Path
+        The output folder (``chunks/`` holds every run's record).
+    node_names : tuple of str
+        Output nodes, then input nodes.
+    entries : tuple of EntryResult
+        In the order of :attr:`CompareSpec.entries`.
+    skipped : tuple of (rule, network, why)
+        Pairs not run.
+    failures : list of dict
+        Chunks that failed (their error and ``where``); their runs are missing.
+    computed, reused : int
+        Runs computed by this call, and runs found already stored.
+
+    """
 
     spec: CompareSpec
+    out: Path
     node_names: tuple[str, ...]
     entries: tuple[EntryResult, ...]
     skipped: tuple[tuple[str, str, str], ...] = ()
+    failures: tuple[dict[str, Any], ...] = ()
+    computed: int = 0
+    reused: int = 0
+
+    @property
+    def complete(self) -> bool:
+        """Whether every run of every entry is present."""
+        return not self.failures and all(len(e.runs) == self.spec.initial_states.runs for e in self.entries)
 
     def table(self) -> list[dict[str, Any]]:
         """One row per entry: means over the runs that completed, minima of the inter-event times."""
         rows = []
         for e in self.entries:
-            ok = np.array([s == "completed" for s in e.status])
-            row: dict[str, Any] = {"rule": e.rule, "network": e.network, "completed": f"{ok.sum()}/{ok.size}"}
+            ok = np.array([s == "completed" for s in e.status], dtype=bool)
+            runs = self.spec.initial_states.runs
+            row: dict[str, Any] = {"rule": e.rule, "network": e.network, "completed": f"{ok.sum()}/{runs}"}
             tx = e.transmissions[ok]
             for c, n in enumerate(self.node_names):
                 row[f"transmissions {n}"] = float(tx[:, c].mean()) if ok.any() else np.nan
@@ -152,6 +190,9 @@ class Comparison:
         ]
         for rule, network, why in self.skipped:
             lines += ["", f"Not run: {rule} / {network}: {why}."]
+        for f in self.failures:
+            last = f["error"].strip().splitlines()[-1] if f["error"].strip() else "unknown error"
+            lines += ["", f"Failed: {f['where']}, runs {f['runs'][0]}..{f['runs'][-1]}: {last}"]
         return "\n".join(lines) + "\n"
 
     def to_json(self) -> dict[str, Any]:
@@ -161,6 +202,7 @@ class Comparison:
             "nodes": list(self.node_names),
             "entries": [e.to_json() for e in self.entries],
             "skipped": [{"rule": r, "network": n, "why": w} for r, n, w in self.skipped],
+            "failures": list(self.failures),
         }
 
 
@@ -178,117 +220,72 @@ def _fmt_share(v: Any) -> str:
     return "–" if not np.isfinite(v) else f"{100 * v:.1f} %"
 
 
-_COPY_NEEDS_IDEAL = (
-    "the observer copy of Remark 3 is simulated as a perfect copy, which a lossy or delayed network "
-    "would break (each node's copy would drift from the observer)"
-)
-
-
-def entry_key(spec: CompareSpec, rule: RuleEntry, network: NetworkEntry) -> str:
-    """A key for one entry's results: it changes when anything that affects them does."""
-    s = spec
-    ident = {
-        "factory": s.factory,
-        "params": s.params,
-        "initial_states": [s.initial_states.low, s.initial_states.high, s.initial_states.runs],
-        "seed": s.initial_states.seed,
-        "t_end": s.t_end,
-        "metrics": [s.metrics.transmissions_window, s.metrics.error_window, s.metrics.error_grid_step],
-        "solver": s.solver,
-        "backend": s.backend,
-        "rule": [rule.name, rule.kind, rule.params, rule.observer_copy],
-        "network": [network.name, repr(network.network)],
-    }
-    text = json.dumps(ident, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
 def compare(
     spec: CompareSpec,
+    out: str | Path,
     *,
-    done: Mapping[str, EntryResult] | None = None,
-    on_entry: Callable[[str, EntryResult], None] | None = None,
+    executor: str = "process",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    chunk: int | None = None,
+    progress: bool = False,
+    on_entry: Callable[[EntryResult], None] | None = None,
 ) -> Comparison:
-    """Run every rule of ``spec`` on every network from the same initial states.
+    """Run (or resume) every rule of ``spec`` on every network, from the same initial states.
 
     Parameters
     ----------
     spec : CompareSpec
-    done : mapping from :func:`entry_key` to EntryResult, optional
-        Entries already computed (e.g. read back from disk); they are not rerun.
+    out : path
+        Output folder; runs already stored there for the same spec are not recomputed.
+    executor, workers, scheduler, client, chunk, progress
+        As in :func:`~etobs.experiments.sweep.run_sweep` (``progress`` off by default).
     on_entry : callable, optional
-        Called as ``on_entry(key, result)`` after each entry is computed, e.g. to
-        persist it at once.
+        Called as ``on_entry(result)`` when the last chunk this call computes for an entry
+        has finished (stored or failed), e.g. to report it.
 
     Returns
     -------
     Comparison
 
+    Raises
+    ------
+    SpecError
+        Before any run, when a rule does not fit the problem (every entry is built first).
+
     """
     if not isinstance(spec, CompareSpec):
-        raise InputError(f"`spec` must be a CompareSpec; got {type(spec).__name__}")
-    factory = resolve_factory(spec.factory)
-    try:
-        base = factory(**spec.params)
-    except TypeError as exc:
-        raise SpecError(f"`system.params` do not fit the factory {spec.factory!r}: {exc}") from exc
-    x0 = spec.initial_states.draw()
-    if x0.shape[1] != base.plant.n_x:
-        raise SpecError(
-            f"`initial_states.low` and `.high` have {x0.shape[1]} entries "
-            f"but the plant has n_x = {base.plant.n_x}"
-        )
-    done = dict(done or {})
-    # every problem is built (and so checked) before the first entry runs
-    todo, skipped = [], []
-    for network in spec.networks:
-        for rule in spec.rules:
-            if rule.observer_copy and network.network is not None:
-                skipped.append((rule.name, network.name, _COPY_NEEDS_IDEAL))
-            else:
-                todo.append((rule, network, rule.apply(base, network.network)))
-    entries = []
-    for rule, network, problem in todo:
-        key = entry_key(spec, rule, network)
-        if key not in done:
-            done[key] = _run_entry(spec, problem, rule, network, x0)
-            if on_entry is not None:
-                on_entry(key, done[key])
-        entries.append(done[key])
-    names = tuple(ch.name for ch in base.layout.channels)
-    return Comparison(spec=spec, node_names=names, entries=tuple(entries), skipped=tuple(skipped))
+        raise InputError(f"`spec` must be a CompareSpec (see parse_compare_spec); got {type(spec).__name__}")
+    names = tuple(ch.name for ch in spec.base().layout.channels)
 
+    def entry(g: int, records: Any) -> EntryResult:
+        rule, network = spec.entries[g]
+        return EntryResult.from_records(rule.name, network.name, records, len(names))
 
-def _run_entry(
-    spec: CompareSpec, problem: Any, rule: RuleEntry, network: NetworkEntry, x0: np.ndarray
-) -> EntryResult:
-    lo, hi = spec.metrics.error_window
-    step = spec.metrics.error_grid_step
-    save = SaveAt(steps=False, grid=np.arange(lo, hi + step / 2, step))
-    start = time.perf_counter()
-    res, backend = _simulate(spec, problem, x0, save)
-    seconds = time.perf_counter() - start
-    tx = transmission_counts(res, spec.metrics.transmissions_window, nodes="all")
-    mins = min_inter_event_time(res, nodes="all")
-    not_applied = packets = None
-    if problem.network is not None:
-        st = res.network_stats()
-        not_applied, packets = st["sent"] - st["applied"], st["sent"]
-    return EntryResult(
-        rule=rule.name,
-        network=network.name,
-        backend=backend,
-        status=tuple(res.status_labels()),
-        transmissions=tx,
-        error=max_estimation_error(res, (lo, hi)),
-        min_inter_event_time=mins,
-        not_applied=not_applied,
-        packets=packets,
-        seconds=seconds,
+    def report(g: int, records: dict[int, dict[str, Any]]) -> None:
+        if on_entry is not None:
+            on_entry(entry(g, records.values()))
+
+    store, computed, reused = run_groups(
+        spec,
+        out,
+        executor=executor,
+        workers=workers,
+        scheduler=scheduler,
+        client=client,
+        chunk=chunk,
+        progress=progress,
+        on_group=report,
     )
-
-
-def _simulate(spec: CompareSpec, problem: Any, x0: np.ndarray, save: SaveAt) -> tuple[EstimationResult, str]:
-    """Simulate one entry; ``"auto"`` is decided by :func:`~etobs.estimation.simulate.simulate`."""
-    res = simulate(problem, x0, spec.t_end, options=spec.options, save=save, backend=spec.backend)
-    return res, res.backend
+    got = stored(spec, store)
+    return Comparison(
+        spec=spec,
+        out=store.out,
+        node_names=names,
+        entries=tuple(entry(s.group, s.records.values()) for s in got),
+        skipped=spec.skipped,
+        failures=tuple(f for s in got for f in s.failures),
+        computed=computed,
+        reused=reused,
+    )

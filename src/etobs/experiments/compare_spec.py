@@ -17,7 +17,8 @@ A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
     error_window = [20.0, 30.0]
     [solver]                       # any SolverOptions field
     rtol = 1e-10
-    [execution]
+    [execution]                    # as in a sweep spec
+    chunk_size = 20                # runs solved together
     backend = "auto"               # the engine (the scipy reference for a rule of your own)
 
     [[rules]]                      # one entry per rule; per-node values are a number
@@ -41,6 +42,9 @@ A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
     capacity = 16
     seed = 1
 
+The tables shared with a sweep spec are parsed by
+:func:`etobs.experiments.common.parse_common`, which documents them.
+
 Rule kinds and their keys: ``base``; ``dynamic`` (any of ``sigma``, ``c``, ``b``,
 ``eps``, ``eta0`` replacing the base :class:`~etobs.model.DynamicRule`'s);
 ``static`` (``eps``); ``periodic`` (``period``); ``relative`` (``rho``, ``eps``);
@@ -50,6 +54,7 @@ Rule kinds and their keys: ``base``; ``dynamic`` (any of ``sigma``, ``c``, ``b``
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any
 
 from etobs._spec import SpecError
@@ -57,15 +62,8 @@ from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
-from etobs.experiments.spec import (
-    InitialStates,
-    Metrics,
-    parse_backend,
-    parse_initial_states,
-    parse_metrics,
-    parse_solver,
-)
-from etobs.hybrid.options import SolverOptions
+from etobs.experiments.common import COMMON_KEYS, Experiment, normalize, parse_common
+from etobs.experiments.systems import build
 from etobs.model.network import (
     ConstantDelay,
     Delay,
@@ -161,69 +159,104 @@ class NetworkEntry:
     network: Network | None
 
 
-@dataclass(frozen=True)
-class CompareSpec:
-    """A validated comparison; build it with :func:`parse_compare_spec`."""
+#: Why an entry is not run: the observer copy needs the ideal network.
+COPY_NEEDS_IDEAL = (
+    "the observer copy of Remark 3 is simulated as a perfect copy, which a lossy or delayed network "
+    "would break (each node's copy would drift from the observer)"
+)
 
-    name: str
-    factory: str
+
+@dataclass(frozen=True, kw_only=True)
+class CompareSpec(Experiment):
+    """A validated comparison; build it with :func:`parse_compare_spec`.
+
+    Its groups are the entries: every rule on every network (networks outer), except
+    the pairs listed in :attr:`skipped`.
+    """
+
     params: dict[str, Any]
-    initial_states: InitialStates
-    t_end: float
-    metrics: Metrics
-    solver: dict[str, Any]
-    backend: str
     rules: tuple[RuleEntry, ...]
     networks: tuple[NetworkEntry, ...]
 
-    @property
-    def options(self) -> SolverOptions:
-        """The solver options of every entry."""
-        return SolverOptions(**self.solver)
+    @classmethod
+    def from_raw(cls, raw: dict[str, Any]) -> CompareSpec:
+        """Validate a spec given as a dictionary (:func:`parse_compare_spec`)."""
+        return parse_compare_spec(raw)
 
-    def with_runs(self, runs: int | None) -> CompareSpec:
-        """The same spec with another number of runs (``None``: unchanged)."""
-        if runs is None:
-            return self
-        ini = replace(self.initial_states, runs=int(_number("runs", runs, lower=1, integer=True)))
-        return replace(self, initial_states=ini)
+    @cached_property
+    def entries(self) -> tuple[tuple[RuleEntry, NetworkEntry], ...]:
+        """The (rule, network) pairs that run, in the order of the table."""
+        return tuple(
+            (r, n)
+            for n in self.networks
+            for r in self.rules
+            if not (r.observer_copy and n.network is not None)
+        )
+
+    @property
+    def skipped(self) -> tuple[tuple[str, str, str], ...]:
+        """``(rule, network, why)`` of every pair that does not run."""
+        return tuple(
+            (r.name, n.name, COPY_NEEDS_IDEAL)
+            for n in self.networks
+            for r in self.rules
+            if r.observer_copy and n.network is not None
+        )
+
+    @property
+    def n_groups(self) -> int:
+        """Number of entries that run."""
+        return len(self.entries)
+
+    def group_identity(self, group: int) -> Any:
+        """The factory's arguments, the rule's kind and numbers and the network (not the names)."""
+        rule, network = self.entries[group]
+        return normalize(
+            {
+                "params": self.params,
+                "rule": [rule.kind, rule.params, rule.observer_copy],
+                "network": repr(network.network),
+            }
+        )
+
+    def where(self, group: int) -> str:
+        """``rule 'R' on network 'N'``."""
+        rule, network = self.entries[group]
+        return f"rule {rule.name!r} on network {network.name!r}"
+
+    def base(self) -> EstimationProblem:
+        """The factory's problem, on which every rule is applied."""
+        return build(self.factory, self.params, len(self.initial_states.low), "system.params")
+
+    def problem(self, group: int) -> EstimationProblem:
+        """The base problem with the entry's rule on every output node and its network."""
+        rule, network = self.entries[group]
+        return rule.apply(self.base(), network.network)
+
+    def check(self) -> None:
+        """Build every entry's problem, so a wrong parameter fails before any run."""
+        base = self.base()
+        for rule, network in self.entries:
+            rule.apply(base, network.network)
+
+    def resolved(self) -> dict[str, Any]:
+        """The common settings, the factory's arguments, the rules and the networks."""
+        rules = [
+            {"name": r.name, "kind": r.kind, **r.params, "observer_copy": r.observer_copy} for r in self.rules
+        ]
+        networks = [{"name": n.name, "network": repr(n.network)} for n in self.networks]
+        return {**super().resolved(), "params": self.params, "rules": rules, "networks": networks}
 
 
 def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
     """Validate a comparison spec given as a dictionary (the parsed TOML)."""
-    top = _keys(
-        "spec",
-        raw,
-        {"system", "initial_states", "horizon", "rules"},
-        {"name", "metrics", "solver", "execution", "networks"},
-    )
-    name = top.get("name", "compare")
-    if not isinstance(name, str) or not name:
-        raise SpecError(f"`name` must be a non-empty string; got {name!r}")
-    system = _keys("system", top["system"], {"factory"}, {"params"})
-    if not isinstance(system["factory"], str):
-        raise SpecError(f"`system.factory` must be a string; got {system['factory']!r}")
-    params = system.get("params", {})
-    if not isinstance(params, dict):
-        raise SpecError(f"`system.params` must be a table of keyword arguments; got {type(params).__name__}")
-    hor = _keys("horizon", top["horizon"], {"t_end"}, set())
-    t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
-    execution = _keys("execution", top.get("execution", {}), set(), {"backend"})
-    backend = parse_backend(execution.get("backend", "auto"))
+    required, optional = COMMON_KEYS
+    top = _keys("spec", raw, required | {"rules"}, optional | {"networks"})
+    common = parse_common(top, default_name="compare", kwargs_key="params")
+    params = common.pop("kwargs")
     rules = _list("rules", top["rules"], _rule)
     networks = _list("networks", top.get("networks", [{"name": "ideal"}]), _network)
-    return CompareSpec(
-        name=name,
-        factory=system["factory"],
-        params=dict(params),
-        initial_states=parse_initial_states(top["initial_states"]),
-        t_end=t_end,
-        metrics=parse_metrics(top.get("metrics", {}), t_end),
-        solver=parse_solver(top.get("solver", {})),
-        backend=backend,
-        rules=rules,
-        networks=networks,
-    )
+    return CompareSpec(**common, params=params, rules=rules, networks=networks, raw=raw)
 
 
 def _list(key: str, items: Any, parse: Any) -> tuple[Any, ...]:

@@ -16,6 +16,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from etobs.errors import InputError
+from etobs.experiments.common import Experiment
 from etobs.experiments.runner import Task, run_task
 
 EXECUTORS = ("serial", "process", "dask")
@@ -23,12 +24,15 @@ EXECUTORS = ("serial", "process", "dask")
 #: times before it is recorded as failed.
 MAX_POOL_RESTARTS = 3
 
+#: What every task of one experiment shares: the spec class and the raw spec.
+Job = tuple[type[Experiment], dict[str, Any]]
 Done = Callable[[Task, list[dict[str, Any]]], None]
 Failed = Callable[[Task, str], None]
 
 
 def execute(
     tasks: Sequence[Task],
+    kind: type[Experiment],
     raw_spec: dict[str, Any],
     on_done: Done,
     on_error: Failed,
@@ -38,42 +42,41 @@ def execute(
     scheduler: str | None = None,
     client: Any = None,
 ) -> None:
-    """Run ``tasks`` with the chosen executor, reporting each one as it finishes."""
+    """Run ``tasks`` of the experiment ``kind.from_raw(raw_spec)``, reporting each as it finishes."""
     if executor not in EXECUTORS:
         raise InputError(f"`executor` must be one of {EXECUTORS}; got {executor!r}")
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InputError(f"`workers` must be a positive integer; got {workers!r}")
     if not tasks:
         return
+    job = (kind, raw_spec)
     if executor == "serial":
-        _serial(tasks, raw_spec, on_done, on_error)
+        _serial(tasks, job, on_done, on_error)
     elif executor == "process":
-        _process(tasks, raw_spec, on_done, on_error, workers)
+        _process(tasks, job, on_done, on_error, workers)
     else:
-        _dask(tasks, raw_spec, on_done, on_error, scheduler, client)
+        _dask(tasks, job, on_done, on_error, scheduler, client)
 
 
-def _serial(tasks: Sequence[Task], raw: dict[str, Any], on_done: Done, on_error: Failed) -> None:
+def _serial(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed) -> None:
     for task in tasks:
         try:
-            records = run_task(raw, task)
+            records = run_task(*job, task)
         except Exception:  # a failing chunk is recorded; the sweep goes on
             on_error(task, traceback.format_exc())
         else:
             on_done(task, records)
 
 
-def _process(
-    tasks: Sequence[Task], raw: dict[str, Any], on_done: Done, on_error: Failed, workers: int | None
-) -> None:
+def _process(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed, workers: int | None) -> None:
     # "spawn" starts clean workers: safe with threads, the same on every platform.
     ctx = multiprocessing.get_context("spawn")
-    lost = _pool_round(list(tasks), raw, on_done, on_error, workers, ctx)
+    lost = _pool_round(list(tasks), job, on_done, on_error, workers, ctx)
     # A dead worker breaks the whole pool and every pending chunk with it. Rerun those
     # chunks one at a time, so only a chunk that itself kills its worker is blamed.
     for task in lost:
         for attempt in range(1, MAX_POOL_RESTARTS + 1):
-            if not _pool_round([task], raw, on_done, on_error, 1, ctx):
+            if not _pool_round([task], job, on_done, on_error, 1, ctx):
                 break
             if attempt == MAX_POOL_RESTARTS:
                 on_error(task, f"the worker process running this chunk died {attempt} times in a row")
@@ -85,12 +88,12 @@ def _worker_init() -> None:
 
 
 def _pool_round(
-    tasks: list[Task], raw: dict[str, Any], on_done: Done, on_error: Failed, workers: int | None, ctx: Any
+    tasks: list[Task], job: Job, on_done: Done, on_error: Failed, workers: int | None, ctx: Any
 ) -> list[Task]:
     """Run ``tasks`` on a fresh pool; return those lost because a worker died."""
     lost: list[Task] = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-        futures = {pool.submit(run_task, raw, t): t for t in tasks}
+        futures = {pool.submit(run_task, *job, t): t for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]
             try:
@@ -106,7 +109,7 @@ def _pool_round(
 
 def _dask(
     tasks: Sequence[Task],
-    raw: dict[str, Any],
+    job: Job,
     on_done: Done,
     on_error: Failed,
     scheduler: str | None,
@@ -128,7 +131,7 @@ def _dask(
         except (OSError, TimeoutError) as exc:
             raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from exc
     try:
-        futures = [client.submit(run_task, raw, t, pure=False) for t in tasks]
+        futures = [client.submit(run_task, *job, t, pure=False) for t in tasks]
         index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
         for fut in dask_completed(futures):
             task = index[fut.key]

@@ -1,4 +1,4 @@
-"""A small progress line on stderr for long sweeps."""
+"""A small progress line on stderr for long experiments (sweeps, comparisons)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import TextIO
 
 
 class Progress:
-    """``sweep NAME: 1200/2600 runs (46%), 0 failed, 12 s, ETA 14 s`` on one line."""
+    """``NAME: 1200/2600 runs (46%), 0 failed, 12 s, ETA 14 s`` on one line."""
 
     def __init__(self, total: int, name: str, *, enabled: bool = True, stream: TextIO | None = None) -> None:
         self.total, self.name, self.enabled = total, name, enabled
@@ -24,11 +24,11 @@ class Progress:
             return
         elapsed = time.monotonic() - self.start
         finished = self.done + self.failed
-        eta = elapsed / finished * (self.total - finished) if finished else float("nan")
+        eta = f"{elapsed / finished * (self.total - finished):.0f} s" if finished else "unknown"
         pct = 100.0 * finished / self.total if self.total else 100.0
         self.stream.write(
-            f"\rsweep {self.name}: {self.done}/{self.total} runs ({pct:.0f}%), {self.failed} failed, "
-            f"{elapsed:.0f} s, ETA {eta:.0f} s "
+            f"\r{self.name}: {self.done}/{self.total} runs ({pct:.0f}%), {self.failed} failed, "
+            f"{elapsed:.0f} s, ETA {eta} "
         )
         self.stream.flush()
 

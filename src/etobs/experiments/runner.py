@@ -1,62 +1,65 @@
-"""Solve one chunk of a sweep: a few runs of one row under one scenario.
+"""Solve one chunk of an experiment: a few runs of one group.
 
-A chunk's numbers do not depend on how the sweep was chunked or where it ran: the
+A chunk's numbers do not depend on how the experiment was chunked or where it ran: the
 initial states of all runs are drawn once from the spec's seed, and the solver gives
-each run bit-for-bit the same result whatever it is batched with.
+each run bit-for-bit the same result whatever it is batched with (a network's packet
+fates are keyed by the run id).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from etobs.estimation import (
-    max_estimation_error,
-    min_inter_event_time,
-    simulate,
-    transmission_counts,
-)
-from etobs.experiments.spec import SweepSpec, parse_spec
-from etobs.experiments.systems import build_problem
+from etobs.estimation import max_estimation_error, min_inter_event_time, simulate, transmission_counts
+from etobs.experiments.common import Experiment
 from etobs.hybrid.options import SaveAt
 
 
 @dataclass(frozen=True)
 class Task:
-    """One chunk: runs ``runs`` of row ``row`` under scenario ``scenario``."""
+    """One chunk: runs ``runs`` of group ``group``, stored under ``key``."""
 
     key: str
-    row: int
-    scenario: int
+    group: int
     runs: tuple[int, ...]
 
 
-def run_task(raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
+def run_task(kind: type[Experiment], raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
     """Simulate a chunk and return one record per run (plain, JSON-ready values).
 
-    Takes the raw spec (a plain dictionary) so that it travels to any worker.
+    Takes the spec class and the raw spec (a plain dictionary) so that it travels to
+    any worker. A record holds the run's ``status``, the ``transmissions`` of every
+    node (output nodes, then input nodes) in the transmissions window, the ``error``
+    ``max |x - xhat|`` on the error window's grid, each node's ``min_inter_event_time``,
+    the initial state ``x0``, the solver's ``steps``, the ``backend`` that ran it, its
+    share of the chunk's wall ``seconds``, and, with a network, the ``packets`` each
+    node sent and those the observer never applied (``not_applied``), over the whole run.
     """
-    spec: SweepSpec = parse_spec(raw_spec)
-    problem = build_problem(spec, task.row, task.scenario)
+    spec = kind.from_raw(raw_spec)
+    problem = spec.problem(task.group)
     x0 = spec.initial_states.draw(max(task.runs) + 1)[list(task.runs)]
-    lo, hi = spec.metrics.error_window
-    hi = min(hi, spec.t_end)
-    step = spec.metrics.error_grid_step
-    grid = np.arange(lo, hi + step / 2, step) if hi >= lo else np.array([spec.t_end])
+    start = time.perf_counter()
     res = simulate(
         problem,
         x0,
         spec.t_end,
         options=spec.options,
-        save=SaveAt(steps=False, grid=grid),
+        save=SaveAt(steps=False, grid=spec.metrics.grid()),
         backend=spec.backend,
         run_ids=np.array(task.runs),
     )
-    counts = transmission_counts(res, spec.metrics.transmissions_window)
-    errors = max_estimation_error(res, (lo, hi)) if hi >= lo else np.full(len(task.runs), np.nan)
-    mins = min_inter_event_time(res)
+    seconds = (time.perf_counter() - start) / len(task.runs)
+    counts = transmission_counts(res, spec.metrics.transmissions_window, nodes="all")
+    errors = max_estimation_error(res, spec.metrics.error_window)
+    mins = min_inter_event_time(res, nodes="all")
+    sent = not_applied = None
+    if problem.network is not None:
+        stats = res.network_stats()
+        sent, not_applied = stats["sent"], stats["sent"] - stats["applied"]
     labels = res.status_labels()
     return [
         {
@@ -67,6 +70,10 @@ def run_task(raw_spec: dict[str, Any], task: Task) -> list[dict[str, Any]]:
             "min_inter_event_time": [_num(v) for v in mins[k]],
             "x0": [float(v) for v in x0[k]],
             "steps": int(res.solution.n_steps[k]),
+            "backend": res.backend,
+            "seconds": seconds,
+            "packets": None if sent is None else [int(c) for c in sent[k]],
+            "not_applied": None if not_applied is None else [int(c) for c in not_applied[k]],
         }
         for k, run in enumerate(task.runs)
     ]

@@ -4,11 +4,12 @@ Layout of an output folder::
 
     spec.json          the spec as given and resolved (defaults filled in)
     meta.json          seed, package versions, start and end times
-    chunks/KEY__A-B.json        records of runs A..B of one row and scenario
+    chunks/KEY__A-B.json        records of runs A..B of one group (a sweep's row under a
+                                scenario, a comparison's rule on a network)
     chunks/KEY__A-B.error.json  the error of a chunk that failed
 
-``KEY`` is a hash of the spec's identity, the row and the scenario, so results of a
-changed spec are never mixed with old ones, and a rerun finds what is already done.
+``KEY`` is a hash of the spec's identity and the group's, so results of a changed spec
+are never mixed with old ones, and a rerun finds what is already done.
 """
 
 from __future__ import annotations
@@ -20,17 +21,16 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from etobs.experiments.spec import SweepSpec, normalize
-from etobs.experiments.systems import factory_kwargs
+from etobs.experiments.common import Experiment
 
 
 def _canonical(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=repr)
 
 
-def task_key(spec: SweepSpec, row: int, scenario: int) -> str:
-    """Hash of everything that determines the numbers of one row under one scenario."""
-    ident = {"spec": spec.identity(), "kwargs": normalize(factory_kwargs(spec, row, scenario))}
+def task_key(spec: Experiment, group: int) -> str:
+    """Hash of everything that determines the numbers of one group."""
+    ident = {"spec": spec.identity(), "kwargs": spec.group_identity(group)}
     return hashlib.sha256(_canonical(ident).encode()).hexdigest()[:20]
 
 

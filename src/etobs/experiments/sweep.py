@@ -12,12 +12,9 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
-from etobs.experiments.executors import execute
-from etobs.experiments.progress import Progress
-from etobs.experiments.runner import Task
-from etobs.experiments.spec import SweepSpec, chunk_size, normalize
-from etobs.experiments.store import ResultStore, atomic_write, task_key
-from etobs.experiments.systems import check_factory, factory_kwargs
+from etobs.experiments.pipeline import run_groups, stored
+from etobs.experiments.spec import SweepSpec
+from etobs.experiments.store import ResultStore, atomic_write
 from etobs.experiments.tables import aggregate, flatten_params, run_rows, to_csv, to_markdown
 
 
@@ -58,20 +55,6 @@ class SweepResult:
         return len(self.runs) == self.spec.n_runs and not self.failures
 
 
-def plan(spec: SweepSpec, store: ResultStore, size: int) -> tuple[list[Task], int]:
-    """Tasks for the runs not stored yet, and the number of runs already stored."""
-    tasks, reused = [], 0
-    for r in range(len(spec.rows)):
-        for s in range(len(spec.scenarios)):
-            key = task_key(spec, r, s)
-            done = store.records(key, spec.initial_states.runs)
-            reused += len(done)
-            missing = [k for k in range(spec.initial_states.runs) if k not in done]
-            for start in range(0, len(missing), size):
-                tasks.append(Task(key=key, row=r, scenario=s, runs=tuple(missing[start : start + size])))
-    return tasks, reused
-
-
 def run_sweep(
     spec: SweepSpec,
     out: str | Path,
@@ -96,61 +79,27 @@ def run_sweep(
         Processes of the local pool (default: one per core).
     scheduler : str, optional
         Dask scheduler address (with ``executor="dask"``), or pass ``client``.
+    client : dask.distributed.Client, optional
+        A client to run on (with ``executor="dask"``).
     chunk : int, optional
         Runs per chunk (default: the spec's ``execution.chunk_size``, else 20).
     progress : bool
         Show a progress line on stderr.
 
     """
-    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
-        raise InputError(f"`chunk` must be a positive integer (runs per chunk); got {chunk!r}")
-    check_factory(spec)
-    store = ResultStore(out)
-    store.clean_temporary()
+    if not isinstance(spec, SweepSpec):
+        raise InputError(f"`spec` must be a SweepSpec (see load_spec); got {type(spec).__name__}")
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    resolved = {
-        "name": spec.name,
-        "factory": spec.factory,
-        "fixed": spec.fixed,
-        "rows": list(spec.rows),
-        "scenarios": [{"name": sc.name, **sc.params} for sc in spec.scenarios],
-        "initial_states": spec.initial_states.__dict__,
-        "t_end": spec.t_end,
-        "metrics": spec.metrics.__dict__,
-        "solver": spec.options.__dict__,
-        "backend": spec.backend,
-    }
-    written = normalize({"as_given": spec.raw, "resolved": resolved}, ints_as_floats=False)
-    atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
-    tasks, reused = plan(spec, store, chunk or chunk_size(spec))
-    bar = Progress(spec.n_runs, spec.name, enabled=progress)
-    bar.update(done=reused)
-    computed = 0
-
-    def done(task: Task, records: list[dict[str, Any]]) -> None:
-        nonlocal computed
-        store.write(task.key, task.runs, records)
-        computed += len(records)
-        bar.update(done=len(records))
-
-    def failed(task: Task, message: str) -> None:
-        where = f"row {task.row}, scenario {spec.scenarios[task.scenario].name!r}"
-        store.write_error(task.key, task.runs, message, where)
-        bar.update(failed=len(task.runs))
-
-    try:
-        execute(
-            tasks,
-            spec.raw,
-            done,
-            failed,
-            executor=executor,
-            workers=workers,
-            scheduler=scheduler,
-            client=client,
-        )
-    finally:
-        bar.close()
+    store, computed, reused = run_groups(
+        spec,
+        out,
+        executor=executor,
+        workers=workers,
+        scheduler=scheduler,
+        client=client,
+        chunk=chunk,
+        progress=progress,
+    )
     result = collect(spec, store, computed=computed, reused=reused)
     _write_outputs(result, started)
     return result
@@ -159,17 +108,14 @@ def run_sweep(
 def collect(spec: SweepSpec, store: ResultStore, *, computed: int = 0, reused: int = 0) -> SweepResult:
     """Gather the stored records of ``spec`` into tables."""
     groups, param_names, failures = [], [], []
-    n = spec.initial_states.runs
-    for r in range(len(spec.rows)):
-        for s, scen in enumerate(spec.scenarios):
-            params = {**spec.rows[r], **scen.params}
-            for k in flatten_params(params):
-                if k not in param_names:
-                    param_names.append(k)
-            key = task_key(spec, r, s)
-            stored = store.records(key, n)
-            groups.append((r, scen.name, params, list(stored.values())))
-            failures += store.errors(key, set(stored), n)
+    for got in stored(spec, store):
+        r, s = spec.row_scenario(got.group)
+        params = {**spec.rows[r], **spec.scenarios[s].params}
+        for k in flatten_params(params):
+            if k not in param_names:
+                param_names.append(k)
+        groups.append((r, spec.scenarios[s].name, params, list(got.records.values())))
+        failures += got.failures
     runs = run_rows(groups)
     keys = [(r, name, flatten_params(params)) for r, name, params, _ in groups]
     return SweepResult(
@@ -239,4 +185,4 @@ def _versions() -> dict[str, str]:
     }
 
 
-__all__ = ["SweepResult", "collect", "factory_kwargs", "plan", "run_sweep"]
+__all__ = ["SweepResult", "collect", "run_sweep"]

@@ -1,56 +1,68 @@
-"""Resolve a spec's ``system.factory`` and build the problem of one row and scenario."""
+"""Resolve a spec's ``system.factory``, check its arguments and build a group's problem."""
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Iterable
 from typing import Any
 
+from etobs._spec import SpecError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import resolve_factory
-from etobs.experiments.spec import SpecError, SweepSpec
 
 
-def factory_kwargs(spec: SweepSpec, row: int, scenario: int) -> dict[str, Any]:
-    """Keyword arguments of one row under one scenario: fixed, then row, then scenario."""
-    return {**spec.fixed, **spec.rows[row], **spec.scenarios[scenario].params}
+def check_arguments(factory: str, calls: Iterable[tuple[str, dict[str, Any]]]) -> None:
+    """Fail early, naming the key, when a call ``(where, kwargs)`` passes an unknown argument.
 
-
-def check_factory(spec: SweepSpec) -> None:
-    """Fail early, naming the key, when a row or scenario passes an unknown argument.
-
-    The factory itself is not called here: it runs in the workers.
+    The factory itself is not called here (in a sweep, it runs in the workers).
     """
-    _check_arguments(spec, resolve_factory(spec.factory))
-
-
-def _check_arguments(spec: SweepSpec, fn: Callable[..., EstimationProblem]) -> None:
+    fn = resolve_factory(factory)
     try:
         sig = inspect.signature(fn)
     except (TypeError, ValueError):  # builtins without a signature: checked when called
         return
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
         return
-    for r in range(len(spec.rows)):
-        for s in range(len(spec.scenarios)):
-            for key in factory_kwargs(spec, r, s):
-                if key not in sig.parameters:
-                    raise SpecError(
-                        f"parameter `{key}` (row {r}, scenario {spec.scenarios[s].name!r}) is not an "
-                        f"argument of the factory {spec.factory!r}; it takes: {', '.join(sig.parameters)}"
-                    )
+    for where, kwargs in calls:
+        for key in kwargs:
+            if key not in sig.parameters:
+                raise SpecError(
+                    f"parameter `{key}` ({where}) is not an argument of the factory "
+                    f"{factory!r}; it takes: {', '.join(sig.parameters)}"
+                )
 
 
-def build_problem(spec: SweepSpec, row: int, scenario: int) -> EstimationProblem:
-    """The estimation problem of ``row`` under ``scenario``."""
-    problem = resolve_factory(spec.factory)(**factory_kwargs(spec, row, scenario))
-    n = len(spec.initial_states.low)
-    if isinstance(problem, EstimationProblem) and problem.plant.n_x != n:
-        raise SpecError(
-            f"`initial_states.low` and `.high` have {n} entries but the plant has n_x = {problem.plant.n_x}"
-        )
+def build(factory: str, kwargs: dict[str, Any], n_x: int, where: str) -> EstimationProblem:
+    """``factory(**kwargs)``, checked to be an :class:`EstimationProblem` with ``n_x`` states.
+
+    ``where`` names the arguments' origin in errors (``"system.params"``, ``"row 0, ..."``).
+    """
+    fn = resolve_factory(factory)
+    try:
+        problem = fn(**kwargs)
+    except TypeError as exc:
+        if not _fits(fn, kwargs):
+            raise SpecError(
+                f"the arguments {', '.join(kwargs) or '(none)'} ({where}) do not fit the factory "
+                f"{factory!r}: {exc}"
+            ) from exc
+        raise
     if not isinstance(problem, EstimationProblem):
+        kind = type(problem).__name__
+        raise SpecError(f"the factory {factory!r} returned {kind}, not an EstimationProblem")
+    if problem.plant.n_x != n_x:
         raise SpecError(
-            f"the factory {spec.factory!r} returned {type(problem).__name__}, not an EstimationProblem"
+            f"`initial_states.low` and `.high` have {n_x} entries but the plant has n_x = {problem.plant.n_x}"
         )
     return problem
+
+
+def _fits(fn: Any, kwargs: dict[str, Any]) -> bool:
+    """Whether ``kwargs`` bind to ``fn``'s signature (so a TypeError came from inside it)."""
+    try:
+        inspect.signature(fn).bind(**kwargs)
+    except TypeError:
+        return False
+    except ValueError:  # no signature
+        return True
+    return True

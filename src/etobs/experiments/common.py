@@ -1,0 +1,329 @@
+"""What every experiment spec shares, parsed once: the base class :class:`Experiment`.
+
+A sweep (``etobs sweep``) and a rule comparison (``etobs compare``) are both a set of
+*groups* (a parameter row under a scenario; a rule on a network), each simulated from
+the same seeded initial states with the same horizon, metrics, solver settings and
+execution settings. These common tables are parsed here, by one function
+(:func:`parse_common`), so a key means the same and fails with the same message in
+every spec format:
+
+``name``
+    letters, digits, ``_`` or ``-``.
+``[system] factory``
+    a registered example or ``"package.module:function"``.
+``[initial_states]``
+    ``low``, ``high`` (lists of numbers), ``runs`` (>= 1), ``seed`` (>= 0).
+``[horizon] t_end``
+    > 0.
+``[metrics]``
+    ``transmissions_window``, ``error_window`` (pairs within ``[0, t_end]``, default the
+    whole horizon), ``error_grid_step`` (> 0, default 1e-3).
+``[solver]``
+    any :class:`~etobs.hybrid.options.SolverOptions` field.
+``[execution]``
+    ``chunk_size`` (runs solved together, default 20) and ``backend`` (``"auto"``,
+    ``"engine"`` or ``"scipy"``).
+
+The pipeline (:mod:`etobs.experiments.pipeline`) runs the groups of any
+:class:`Experiment` through the same executors and chunk store.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any, Self
+
+import numpy as np
+
+from etobs._spec import SpecError
+from etobs._spec import keys as _keys
+from etobs._spec import number as _number
+from etobs.errors import InputError
+from etobs.estimation.problem import EstimationProblem
+from etobs.hybrid.options import SolverOptions
+from etobs.hybrid.solver import check_backend
+
+_SOLVER_KEYS = {
+    "method",
+    "rtol",
+    "atol",
+    "max_step",
+    "first_step",
+    "max_jumps",
+    "max_steps",
+    "event_samples",
+    "event_xtol",
+}
+#: Runs per chunk when ``execution.chunk_size`` is not given.
+DEFAULT_CHUNK = 20
+#: Format of the stored records; part of every result key, so records written in an
+#: earlier format are never mixed with new ones.
+RECORD_FORMAT = 2
+
+
+@dataclass(frozen=True)
+class InitialStates:
+    """Plant initial states drawn uniformly in the box ``[low, high]`` with ``seed``."""
+
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    runs: int
+    seed: int
+
+    def draw(self, count: int | None = None) -> np.ndarray:
+        """The first ``count`` (default ``runs``) initial states, shape ``(count, n_x)``.
+
+        Row ``k`` is the same whatever ``count``, and for every group.
+        """
+        rng = np.random.default_rng(self.seed)
+        lo, hi = np.array(self.low), np.array(self.high)
+        n = self.runs if count is None else count
+        return lo + rng.uniform(0.0, 1.0, size=(n, lo.size)) * (hi - lo)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Windows of the per-run metrics and the grid spacing of the error metric."""
+
+    transmissions_window: tuple[float, float]
+    error_window: tuple[float, float]
+    error_grid_step: float
+
+    def grid(self) -> np.ndarray:
+        """The save grid on which ``max |x - xhat|`` is taken (the error window, both ends)."""
+        lo, hi = self.error_window
+        return np.arange(lo, hi + self.error_grid_step / 2, self.error_grid_step)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Experiment(abc.ABC):
+    """The parts every experiment spec shares; subclasses say what their groups are.
+
+    A group is one problem simulated from the spec's initial states (a sweep's parameter
+    row under a scenario, a comparison's rule on a network). Groups are numbered
+    ``0 .. n_groups - 1``.
+    """
+
+    name: str
+    factory: str
+    initial_states: InitialStates
+    t_end: float
+    metrics: Metrics
+    solver: dict[str, Any]
+    backend: str
+    chunk_size: int
+    raw: dict[str, Any] = field(repr=False, compare=False)
+
+    @classmethod
+    @abc.abstractmethod
+    def from_raw(cls, raw: dict[str, Any]) -> Self:
+        """Validate a spec given as a dictionary (the parsed TOML)."""
+
+    @property
+    @abc.abstractmethod
+    def n_groups(self) -> int:
+        """Number of groups."""
+
+    @abc.abstractmethod
+    def group_identity(self, group: int) -> Any:
+        """What, besides :meth:`identity`, determines the numbers of ``group`` (JSON-ready)."""
+
+    @abc.abstractmethod
+    def where(self, group: int) -> str:
+        """``group`` in words, for reports and errors."""
+
+    @abc.abstractmethod
+    def problem(self, group: int) -> EstimationProblem:
+        """The estimation problem of ``group``."""
+
+    def check(self) -> None:  # noqa: B027 (a default, not an abstract method)
+        """Fail early, naming the key, on what can be checked before any run (default: nothing)."""
+
+    @property
+    def options(self) -> SolverOptions:
+        """The solver settings as :class:`SolverOptions`."""
+        return SolverOptions(**self.solver)
+
+    @property
+    def n_runs(self) -> int:
+        """Total number of runs: groups x initial states."""
+        return self.n_groups * self.initial_states.runs
+
+    def with_runs(self, runs: int | None = None, seed: int | None = None) -> Self:
+        """The same experiment with another number of initial states and/or seed."""
+        raw = {**self.raw, "initial_states": dict(self.raw["initial_states"])}
+        if runs is not None:
+            raw["initial_states"]["runs"] = runs
+        if seed is not None:
+            raw["initial_states"]["seed"] = seed
+        return type(self).from_raw(raw)
+
+    def with_backend(self, backend: str) -> Self:
+        """The same experiment solved with another backend (``execution.backend``)."""
+        raw = {**self.raw, "execution": {**self.raw.get("execution", {}), "backend": backend}}
+        return type(self).from_raw(raw)
+
+    def identity(self) -> dict[str, Any]:
+        """What determines the numbers of every run, for result keys.
+
+        Resolved values are used, so ``1`` and ``1.0`` or an omitted default and the
+        same value written out give the same key. The number of runs is left out: run
+        ``k``'s initial state is the ``k``-th row of the seeded draw whatever the total,
+        so more runs reuse the ones already stored. The etobs version and the record
+        format are included, so an upgrade never mixes old and new numbers. (A change to
+        a user factory's code is not seen: use a new output folder.)
+        """
+        from etobs import __version__
+
+        st, m = self.initial_states, self.metrics
+        return normalize(
+            {
+                "etobs": __version__,
+                "records": RECORD_FORMAT,
+                "factory": self.factory,
+                "initial_states": {"low": st.low, "high": st.high, "seed": st.seed},
+                "t_end": self.t_end,
+                "metrics": [m.transmissions_window, m.error_window, m.error_grid_step],
+                "solver": self.options.__dict__,
+                "backend": self.backend,
+            }
+        )
+
+    def resolved(self) -> dict[str, Any]:
+        """The common settings with every default filled in (written to ``spec.json``)."""
+        return {
+            "name": self.name,
+            "factory": self.factory,
+            "initial_states": self.initial_states.__dict__,
+            "t_end": self.t_end,
+            "metrics": self.metrics.__dict__,
+            "solver": self.options.__dict__,
+            "backend": self.backend,
+            "chunk_size": self.chunk_size,
+        }
+
+
+def parse_common(top: dict[str, Any], *, default_name: str, kwargs_key: str) -> dict[str, Any]:
+    """The shared tables of a spec whose top-level keys were checked, as keyword arguments.
+
+    ``kwargs_key`` names the ``[system]`` table of factory arguments (``fixed`` in a
+    sweep, ``params`` in a comparison); it is returned under ``"kwargs"``.
+    """
+    system = _keys("system", top["system"], {"factory"}, {kwargs_key})
+    if not isinstance(system["factory"], str):
+        raise SpecError(f"`system.factory` must be a string; got {system['factory']!r}")
+    kwargs = system.get(kwargs_key, {})
+    if not isinstance(kwargs, dict):
+        raise SpecError(
+            f"`system.{kwargs_key}` must be a table of keyword arguments; got {type(kwargs).__name__}"
+        )
+    hor = _keys("horizon", top["horizon"], {"t_end"}, set())
+    t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
+    execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size", "backend"})
+    chunk = execution.get("chunk_size", DEFAULT_CHUNK)
+    return {
+        "name": _name("name", top.get("name", default_name)),
+        "factory": system["factory"],
+        "kwargs": dict(kwargs),
+        "initial_states": parse_initial_states(top["initial_states"]),
+        "t_end": t_end,
+        "metrics": parse_metrics(top.get("metrics", {}), t_end),
+        "solver": parse_solver(top.get("solver", {})),
+        "backend": parse_backend(execution.get("backend", "auto")),
+        "chunk_size": int(_number("execution.chunk_size", chunk, lower=1, integer=True)),
+    }
+
+
+#: Top-level keys :func:`parse_common` reads (required, optional).
+COMMON_KEYS = ({"system", "initial_states", "horizon"}, {"name", "metrics", "solver", "execution"})
+
+
+def normalize(obj: Any, *, ints_as_floats: bool = True) -> Any:
+    """JSON-ready copy: numpy scalars to Python, tuples to lists, inf and NaN to strings.
+
+    With ``ints_as_floats`` (for result keys) ``1`` and ``1.0`` become the same value.
+    """
+    if isinstance(obj, dict):
+        return {str(k): normalize(v, ints_as_floats=ints_as_floats) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [normalize(v, ints_as_floats=ints_as_floats) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return str(obj)
+    if ints_as_floats and isinstance(obj, int) and not isinstance(obj, bool):
+        return float(obj)
+    return obj
+
+
+def _name(key: str, value: Any) -> str:
+    if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
+        raise SpecError(f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {value!r}")
+    return value
+
+
+def _pair(key: str, value: Any) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise SpecError(f"`{key}` must be a pair [start, stop]; got {value!r}")
+    lo, hi = (_number(f"{key}[{i}]", v) for i, v in enumerate(value))
+    if hi < lo:
+        raise SpecError(f"`{key}` must satisfy start <= stop; got {value!r}")
+    return float(lo), float(hi)
+
+
+def _window(key: str, value: Any, t_end: float) -> tuple[float, float]:
+    lo, hi = _pair(key, value)
+    if lo < 0 or hi > t_end:
+        raise SpecError(f"`{key}` must lie within [0, horizon.t_end = {t_end:g}]; got {value!r}")
+    return lo, hi
+
+
+def parse_backend(value: Any) -> str:
+    """Validate ``execution.backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
+    try:
+        return check_backend(value, "execution.backend")
+    except InputError as exc:
+        raise SpecError(str(exc)) from None
+
+
+def parse_initial_states(table: Any) -> InitialStates:
+    """Validate ``[initial_states]``: ``low``, ``high``, ``runs``, ``seed``."""
+    ini = _keys("initial_states", table, {"low", "high", "runs", "seed"}, set())
+    for k in ("low", "high"):
+        if not isinstance(ini[k], list) or not ini[k]:
+            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {ini[k]!r}")
+    low = tuple(float(_number(f"initial_states.low[{i}]", v)) for i, v in enumerate(ini["low"]))
+    high = tuple(float(_number(f"initial_states.high[{i}]", v)) for i, v in enumerate(ini["high"]))
+    if len(low) != len(high):
+        raise SpecError(
+            f"`initial_states.low` has {len(low)} entries but `initial_states.high` has {len(high)}"
+        )
+    if any(h < lo for lo, h in zip(low, high, strict=True)):
+        raise SpecError("`initial_states.high` must be >= `initial_states.low` entrywise")
+    return InitialStates(
+        low,
+        high,
+        int(_number("initial_states.runs", ini["runs"], lower=1, integer=True)),
+        int(_number("initial_states.seed", ini["seed"], lower=0, integer=True)),
+    )
+
+
+def parse_metrics(table: Any, t_end: float) -> Metrics:
+    """Validate ``[metrics]`` (every key optional) for a horizon ``t_end``."""
+    met = _keys("metrics", table, set(), {"transmissions_window", "error_window", "error_grid_step"})
+    return Metrics(
+        _window("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end]), t_end),
+        _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end),
+        float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
+    )
+
+
+def parse_solver(table: Any) -> dict[str, Any]:
+    """Validate ``[solver]``: any :class:`SolverOptions` field."""
+    solver = _keys("solver", table, set(), _SOLVER_KEYS)
+    try:
+        SolverOptions(**solver)
+    except InputError as exc:
+        raise SpecError(f"`solver`: {exc}") from exc
+    return dict(solver)

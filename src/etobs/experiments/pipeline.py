@@ -1,0 +1,126 @@
+"""One pipeline for every experiment: plan the missing chunks, run them, store each one.
+
+:func:`run_groups` serves the sweep (:func:`~etobs.experiments.sweep.run_sweep`) and the
+rule comparison (:func:`~etobs.experiments.compare.compare`) alike: the chunks of every
+group of an :class:`~etobs.experiments.common.Experiment` run on the chosen executor
+(this process, a local process pool or a Dask cluster) and are written to the chunk
+store as they arrive, so an interrupted experiment resumes with what it finished.
+:func:`stored` reads them back.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from etobs.errors import InputError
+from etobs.experiments.common import Experiment, normalize
+from etobs.experiments.executors import execute
+from etobs.experiments.progress import Progress
+from etobs.experiments.runner import Task
+from etobs.experiments.store import ResultStore, atomic_write, task_key
+
+
+@dataclass(frozen=True)
+class Stored:
+    """What the store holds for one group: its records by run and its standing failures."""
+
+    group: int
+    records: dict[int, dict[str, Any]]
+    failures: list[dict[str, Any]]
+
+
+def plan(spec: Experiment, store: ResultStore, size: int) -> tuple[list[Task], int]:
+    """Tasks for the runs not stored yet, and the number of runs already stored."""
+    tasks, reused = [], 0
+    n = spec.initial_states.runs
+    for g in range(spec.n_groups):
+        key = task_key(spec, g)
+        done = store.records(key, n)
+        reused += len(done)
+        missing = [k for k in range(n) if k not in done]
+        for start in range(0, len(missing), size):
+            tasks.append(Task(key=key, group=g, runs=tuple(missing[start : start + size])))
+    return tasks, reused
+
+
+def run_groups(
+    spec: Experiment,
+    out: str | Path,
+    *,
+    executor: str = "process",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    chunk: int | None = None,
+    progress: bool = True,
+    on_group: Callable[[int, dict[int, dict[str, Any]]], None] | None = None,
+) -> tuple[ResultStore, int, int]:
+    """Compute the runs of ``spec`` missing from ``out``; return the store, computed, reused.
+
+    ``out/spec.json`` records the spec as given and resolved. ``on_group(g, records)`` is
+    called once every chunk of group ``g`` computed by this call has been stored or has
+    failed, with the group's stored records by run.
+    Parameters as in :func:`~etobs.experiments.sweep.run_sweep`.
+    """
+    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
+        raise InputError(f"`chunk` must be a positive integer (runs per chunk); got {chunk!r}")
+    spec.check()
+    store = ResultStore(out)
+    store.clean_temporary()
+    written = normalize({"as_given": spec.raw, "resolved": spec.resolved()}, ints_as_floats=False)
+    atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
+    tasks, reused = plan(spec, store, chunk or spec.chunk_size)
+    pending: dict[int, int] = {}
+    for t in tasks:
+        pending[t.group] = pending.get(t.group, 0) + 1
+    bar = Progress(spec.n_runs, spec.name, enabled=progress)
+    bar.update(done=reused)
+    computed = 0
+
+    def finished(task: Task) -> None:
+        pending[task.group] -= 1
+        if pending[task.group] == 0 and on_group is not None:
+            on_group(task.group, store.records(task.key, spec.initial_states.runs))
+
+    def done(task: Task, records: list[dict[str, Any]]) -> None:
+        nonlocal computed
+        store.write(task.key, task.runs, records)
+        computed += len(records)
+        bar.update(done=len(records))
+        finished(task)
+
+    def failed(task: Task, message: str) -> None:
+        store.write_error(task.key, task.runs, message, spec.where(task.group))
+        bar.update(failed=len(task.runs))
+        finished(task)
+
+    try:
+        execute(
+            tasks,
+            type(spec),
+            spec.raw,
+            done,
+            failed,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            client=client,
+        )
+    finally:
+        bar.close()
+    return store, computed, reused
+
+
+def stored(spec: Experiment, store: ResultStore) -> list[Stored]:
+    """The records and standing failures of every group of ``spec`` in ``store``."""
+    n = spec.initial_states.runs
+    out = []
+    for g in range(spec.n_groups):
+        key = task_key(spec, g)
+        records = store.records(key, n)
+        out.append(Stored(group=g, records=records, failures=store.errors(key, set(records), n)))
+    return out
