@@ -138,3 +138,40 @@ def test_metrics_errors_and_edge_cases():
         max_estimation_error(res, (0.1, 0.2))
     with pytest.raises(InputError, match=r"this result kept no arcs"):
         res.arc(0)
+
+
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
+def test_estimation_error_folded_during_the_solve_is_the_one_from_the_grid(backend):
+    grid = np.linspace(0.5, 2.0, 151)
+    x0 = [[3, 2, 3, -2], [10, 5, 15, 2]]
+    full = simulate(robot_arm(), x0, 2.0, save=SaveAt(steps=False, grid=grid), backend=backend)
+    save = SaveAt(steps=False, grid=grid, max_distance="estimation_error")
+    folded = simulate(robot_arm(), x0, 2.0, save=save, backend=backend)
+    assert folded.solution.grid is None and folded.notes == ()
+    want = max_estimation_error(full, (0.5, 2.0))
+    np.testing.assert_allclose(max_estimation_error(folded, (0.0, 2.0)), want, rtol=1e-14)
+    assert np.all(want > 0)
+    np.testing.assert_array_equal(folded.solution.jumps.t, full.solution.jumps.t)
+    with pytest.raises(
+        InputError, match=r"kept only max \|x - xhat\| over its grid \(151 points on \[0.5, 2\] s\)"
+    ):
+        max_estimation_error(folded, (1.0, 2.0))
+    with pytest.raises(
+        InputError, match=r"must be 'estimation_error' \(max \|x - xhat\|\); got \(\(0,\), \(4,\)\)"
+    ):
+        simulate(robot_arm(), x0, 2.0, save=SaveAt(grid=grid, max_distance=([0], [4])), backend=backend)
+
+
+def test_estimation_error_with_psi_is_reduced_after_the_solve_and_says_so():
+    from tests.estimation.test_one_run_models import _problem, _with_params
+
+    pb = _problem(*_with_params())
+    grid = np.linspace(1.0, 3.0, 41)
+    full = simulate(pb, [[1.0, 0.0], [0.5, -1.0]], 3.0, save=SaveAt(steps=False, grid=grid))
+    save = SaveAt(steps=False, grid=grid, max_distance="estimation_error")
+    folded = simulate(pb, [[1.0, 0.0], [0.5, -1.0]], 3.0, save=save)
+    assert folded.solution.grid is None
+    assert folded.notes and "psi is not compiled into the solver" in folded.notes[0]
+    np.testing.assert_array_equal(
+        max_estimation_error(folded, (1.0, 3.0)), max_estimation_error(full, (1.0, 3.0))
+    )

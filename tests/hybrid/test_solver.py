@@ -162,6 +162,58 @@ def test_grid_only_keeps_no_arcs(backend):
     np.testing.assert_allclose(sol.grid.x[0, 0], sol.x_final[0])
 
 
+def test_max_distance_is_the_grid_maximum_without_keeping_the_grid(backend):
+    # the two clocks' distance |x0 - x1| on a grid crossing both resets, and the
+    # distance of x0 to itself and x1 (two pairs): the same maximum as from the kept grid
+    grid = np.linspace(0.0, 2.0, 81)
+    x0 = [[0.0, 0.0], [0.1, 0.05]]
+    args = (two_clocks(0.5, 0.3), x0, (0.0, 2.0))
+    full = solve(*args, save=SaveAt(steps=False, grid=grid), backend=backend)
+    for pairs in (([0], [1]), ([0, 1], [1, 1])):
+        sol = solve(*args, save=SaveAt(steps=False, grid=grid, max_distance=pairs), backend=backend)
+        assert sol.grid is None and sol.arcs is None
+        d = full.grid.x[..., pairs[0]] - full.grid.x[..., pairs[1]]
+        np.testing.assert_allclose(sol.grid_max.value, np.sqrt((d * d).sum(axis=-1)).max(axis=1), rtol=1e-15)
+        np.testing.assert_array_equal(sol.grid_max.t, grid)
+        assert np.all(sol.grid_max.value > 0)
+    # same jumps and steps as when the grid is kept
+    np.testing.assert_array_equal(sol.jumps.t, full.jumps.t)
+    np.testing.assert_array_equal(sol.n_steps, full.n_steps)
+
+
+def test_max_distance_is_nan_for_a_run_that_stops_before_the_grid_ends(backend):
+    system = HybridSystem(n=1, n_rules=0, flow=_square, guard=_no_guard, jump=_keep)
+    save = SaveAt(steps=False, grid=np.linspace(0.0, 2.0, 21), max_distance=([0], [0]))
+    sol = solve(system, [[1.0], [-1.0]], (0.0, 2.0), save=save, backend=backend)
+    assert np.isnan(sol.grid_max.value[0]) and sol.grid_max.value[1] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"max_distance": ([0], [1])}, r"`max_distance` needs a `grid`"),
+        ({"grid": [1.0], "max_distance": ([0, 1], [1])}, r"two equal-length, non-empty lists of state"),
+        ({"grid": [1.0], "max_distance": ([], [])}, r"two equal-length, non-empty lists"),
+        ({"grid": [1.0], "max_distance": ([0.5], [1])}, r"two equal-length, non-empty lists"),
+        (
+            {"grid": [1.0], "max_distance": "error"},
+            r"a pair of index lists or 'estimation_error'; got 'error'",
+        ),
+    ],
+)
+def test_bad_max_distance(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        SaveAt(**kwargs)
+
+
+def test_max_distance_indices_and_names_are_checked_by_the_solve(backend):
+    args = (two_clocks(0.5, 0.3), [0.0, 0.0], (0.0, 1.0))
+    with pytest.raises(InputError, match=r"`max_distance` indices must lie in 0 .. 1 \(the state size\)"):
+        solve(*args, save=SaveAt(grid=[0.5], max_distance=([0], [2])), backend=backend)
+    with pytest.raises(InputError, match=r"'estimation_error'` needs an estimation problem"):
+        solve(*args, save=SaveAt(grid=[0.5], max_distance="estimation_error"), backend=backend)
+
+
 def test_initial_state_in_the_jump_set_jumps_at_t0(backend):
     sol = solve(two_clocks(0.5, 0.3), [0.7, 0.0], (0.0, 0.1), backend=backend)
     assert sol.jumps.t.tolist() == [0.0]

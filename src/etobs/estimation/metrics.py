@@ -102,7 +102,9 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
     """``max |x - xhat|`` over the save-grid points in ``window``, per run.
 
     The maximum is taken on the grid given to ``SaveAt(grid=...)``; state that grid
-    with the figure (the robot-arm demo uses a 1 ms grid).
+    with the figure (the robot-arm demo uses a 1 ms grid). A result simulated with
+    ``SaveAt(grid=g, max_distance="estimation_error")`` kept only this maximum over
+    ``g``: the window must then contain every point of ``g``.
 
     Returns
     -------
@@ -112,6 +114,18 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
     """
     lo, hi = _window(window, result)
     g = result.solution.grid
+    kept = result.solution.grid_max
+    if g is None and kept is not None:
+        inside = (kept.t >= lo) & (kept.t <= hi)
+        if kept.t.size and np.all(inside):
+            return kept.value.copy()
+        raise InputError(
+            f"this result kept only max |x - xhat| over its grid ({kept.t.size} points on "
+            f"[{kept.t[0]:g}, {kept.t[-1]:g}] s), which the window [{lo:g}, {hi:g}] does not cover "
+            "whole: simulate with SaveAt(grid=...) and no max_distance to take other windows"
+            if kept.t.size
+            else "this result kept max |x - xhat| over an empty grid"
+        )
     if g is None:
         result.on_grid()  # raises the error that says how to keep a grid
     assert g is not None

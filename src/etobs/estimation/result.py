@@ -58,6 +58,7 @@ class EstimationResult:
     problem: EstimationProblem
     solution: HybridSolution
     backend_reason: str = ""
+    notes: tuple[str, ...] = ()  # what was done otherwise than asked, and why
 
     @property
     def backend(self) -> str:

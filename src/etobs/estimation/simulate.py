@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
+from etobs.hybrid.solution import GridMax
 from etobs.hybrid.solver import check_backend
 
 
@@ -46,7 +48,10 @@ def simulate(
     options : SolverOptions, optional
         Solver settings (tolerances, jump limit, event sampling).
     save : SaveAt, optional
-        What to keep: full arcs (default) and/or states on a time grid.
+        What to keep: full arcs (default) and/or states on a time grid. With
+        ``SaveAt(grid=g, max_distance="estimation_error")`` only each run's
+        ``max |x - xhat|`` over ``g`` is kept, computed while the run is solved (what a
+        sweep needs, without the grid's memory); :func:`max_estimation_error` reads it.
     backend : {"auto", "engine", "scipy"}
         ``"engine"``: the compiled solver (:mod:`etobs.estimation.compiled`), one run per
         thread, with the model's functions compiled; it runs every etobs rule and
@@ -91,15 +96,53 @@ def simulate(
         if ids.shape != (B,) or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
             raise InputError(f"`run_ids` must be {B} non-negative integers (one per run); got {run_ids!r}")
     q0 = problem.initial_state(X0, Z0, E0, t0, ids)
+    solver_save, after, notes = _estimation_error_save(problem, save)
     if backend == "engine":
         from etobs.estimation.compiled import compile_problem
         from etobs.hybrid.compiled import solve_compiled
 
         cp = compile_problem(problem)
-        sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=save)
+        sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=solver_save)
     else:
-        sol = solve_reference(problem.hybrid_system(), q0, (t0, t_end), options=options, save=save)
-    return EstimationResult(problem=problem, solution=sol, backend_reason=reason)
+        sol = solve_reference(problem.hybrid_system(), q0, (t0, t_end), options=options, save=solver_save)
+    res = EstimationResult(problem=problem, solution=sol, backend_reason=reason, notes=notes)
+    if after:  # the error needs psi, which the solver does not know: reduce the kept grid
+        from etobs.estimation.metrics import max_estimation_error
+
+        g = sol.grid
+        assert g is not None
+        value = max_estimation_error(res, (float(g.t[0]), float(g.t[-1]))) if g.t.size else np.full(B, np.nan)
+        sol = replace(sol, grid=None, grid_max=GridMax(g.t, value))
+        res = replace(res, solution=sol)
+    return res
+
+
+def _estimation_error_save(
+    problem: EstimationProblem, save: SaveAt | None
+) -> tuple[SaveAt | None, bool, tuple]:
+    """The solver's ``SaveAt`` for ``max_distance="estimation_error"``, and whether to reduce after.
+
+    With ``xhat = z[:n_x]`` (no ``psi``) the error ``|x - xhat|`` is a distance between
+    entries of the state, which the solvers fold as they go; with a ``psi`` the grid's
+    states are kept and reduced after the solve, and the result's notes say so.
+    """
+    if save is None or save.max_distance is None:
+        return save, False, ()
+    if save.max_distance != "estimation_error":
+        raise InputError(
+            "`save.max_distance` of an estimation problem must be 'estimation_error' (max |x - xhat|); "
+            f"got {save.max_distance!r}"
+        )
+    lay, n_x = problem.layout, problem.plant.n_x
+    if problem.observer.psi is None:
+        x = range(lay.x.start, lay.x.stop)
+        z = range(lay.z.start, lay.z.start + n_x)
+        return replace(save, max_distance=(tuple(x), tuple(z))), False, ()
+    note = (
+        "max_distance='estimation_error': the observer's psi is not compiled into the solver, so the "
+        "grid's states were kept and max |x - xhat| taken after the solve (memory grows with the grid)"
+    )
+    return replace(save, max_distance=None), True, (note,)
 
 
 def choose_backend(problem: EstimationProblem, backend: str = "auto") -> tuple[str, str]:

@@ -91,9 +91,14 @@ class Metrics:
     error_grid_step: float
 
     def grid(self) -> np.ndarray:
-        """The save grid on which ``max |x - xhat|`` is taken (the error window, both ends)."""
+        """The save grid on which ``max |x - xhat|`` is taken: steps from the window's start.
+
+        Points past the window's end by rounding (``lo + k step`` a few ulps above ``hi``)
+        are left out: they would lie past the horizon when the window ends at ``t_end``.
+        """
         lo, hi = self.error_window
-        return np.arange(lo, hi + self.error_grid_step / 2, self.error_grid_step)
+        g = np.arange(lo, hi + self.error_grid_step / 2, self.error_grid_step)
+        return g[g <= hi]
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -81,6 +81,8 @@ def _kernel(
     log_j,
     grid_x,
     grid_j,
+    dist,
+    grid_max,
     arc_n,
     arc_t,
     arc_j,
@@ -121,6 +123,8 @@ def _kernel(
             log_j,
             grid_x,
             grid_j,
+            dist,
+            grid_max,
             arc_n,
             arc_t,
             arc_j,
@@ -164,6 +168,8 @@ def _solve_one(
     log_j,
     grid_x,
     grid_j,
+    dist,
+    grid_max,
     arc_n,
     arc_t,
     arc_j,
@@ -241,8 +247,7 @@ def _solve_one(
     if keep_steps:
         narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
     while gnext < n_grid and grid[gnext] <= t:
-        grid_x[run, gnext, :] = x
-        grid_j[run, gnext] = j
+        _grid_keep(grid_x, grid_j, dist, grid_max, run, gnext, j, x)
         gnext += 1
 
     # jumps at t0
@@ -350,8 +355,7 @@ def _solve_one(
             while gnext < n_grid and grid[gnext] <= t_stop:
                 th = min(max((grid[gnext] - t_start) / hh, 0.0), 1.0)
                 _dense_eval(Q, nq, dop853, x, th, xs)
-                grid_x[run, gnext, :] = xs
-                grid_j[run, gnext] = j
+                _grid_keep(grid_x, grid_j, dist, grid_max, run, gnext, j, xs)
                 gnext += 1
             t = t_stop
             for q in range(n):
@@ -372,6 +376,8 @@ def _solve_one(
         if failed(args):
             st = MODEL_ERROR
 
+    if dist.shape[0] > 0 and gnext < n_grid:  # grid points never reached
+        grid_max[run] = np.nan
     status[run] = st
     t_final[run] = t
     j_final[run] = j
@@ -381,6 +387,29 @@ def _solve_one(
     log_n[run] = nlog
     arc_n[run] = narc
     error_code[run] = load_i64(args[6])
+
+
+@jit
+def _grid_keep(grid_x, grid_j, dist, grid_max, run, gk, j, xs):
+    """Keep the state ``xs`` at grid point ``gk``, or only fold it into the run's maximum.
+
+    With index pairs ``dist`` (rows ``(a, b)``), ``grid_max[run]`` becomes the largest
+    ``sqrt(sum (xs[a] - xs[b])**2)`` so far (``SaveAt(max_distance=...)``), NaN once a
+    value is not finite; the states are not kept.
+    """
+    if dist.shape[0] == 0:
+        grid_x[run, gk, :] = xs
+        grid_j[run, gk] = j
+        return
+    acc = 0.0
+    for i in range(dist.shape[0]):
+        d = xs[dist[i, 0]] - xs[dist[i, 1]]
+        acc += d * d
+    e = np.sqrt(acc)
+    if not np.isfinite(e) or np.isnan(grid_max[run]):
+        grid_max[run] = np.nan
+    elif e > grid_max[run]:
+        grid_max[run] = e
 
 
 @jit

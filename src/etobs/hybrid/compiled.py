@@ -26,7 +26,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.options import SaveAt, SolverOptions
-from etobs.hybrid.solution import HybridArc, HybridSolution, JumpLog, SavedGrid
+from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid
 from etobs.hybrid.system import _check_sizes
 
 #: Jump-log entries kept per run on the first pass (runs with more are solved again
@@ -206,14 +206,17 @@ def solve_compiled(
     opts = options or SolverOptions()
     save = save or SaveAt()
     grid = np.empty(0) if save.grid is None else np.array(save.grid, dtype=float, order="C")
-    out = _Buffers(B, system.n, grid.shape[0])
+    dist = save.distance_pairs(system.n)
+    out = _Buffers(B, system.n, grid.shape[0], reduce=dist.shape[0] > 0)
     runs = np.arange(B)
     log_cap = int(np.clip(_BUFFER_BUDGET // max(B, 1), 64, LOG_CAPACITY))
     arc_cap = int(np.clip(_BUFFER_BUDGET // max(B * system.n, 1), 64, ARC_CAPACITY)) if save.steps else 0
     logs: dict[int, tuple[np.ndarray, ...]] = {}
     arcs: dict[int, tuple[np.ndarray, ...]] = {}
     while runs.size:
-        part = _call(system, x, P, t0, t_end, opts, save.steps, grid, runs, log_cap, arc_cap, out, parallel)
+        part = _call(
+            system, x, P, t0, t_end, opts, save.steps, grid, dist, runs, log_cap, arc_cap, out, parallel
+        )
         full = (out.log_n[runs] > log_cap) | (out.arc_n[runs] > arc_cap)
         for slot in np.flatnonzero(~full):
             r = int(runs[slot])
@@ -234,12 +237,13 @@ def solve_compiled(
         x_final=out.x_final,
         jumps=_jump_log(logs, B),
         arcs=tuple(HybridArc(*arcs[r]) for r in range(B)) if save.steps else None,
-        grid=SavedGrid(grid, out.grid_j, out.grid_x) if save.grid is not None else None,
+        grid=SavedGrid(grid, out.grid_j, out.grid_x) if save.grid is not None and not dist.size else None,
         n_steps=out.n_steps,
         n_rejected=out.n_rejected,
         rule_names=system.rule_names,
         backend="engine",
         failures=tuple(system.failure(c) if c else "" for c in out.error_code),
+        grid_max=GridMax(grid, out.grid_max) if dist.size else None,
     )
 
 
@@ -263,7 +267,7 @@ def _params(params: Any, n_params: int, B: int) -> np.ndarray:
 class _Buffers:
     """Per-run outputs of the kernel."""
 
-    def __init__(self, B: int, n: int, n_grid: int) -> None:
+    def __init__(self, B: int, n: int, n_grid: int, *, reduce: bool) -> None:
         self.status = np.zeros(B, dtype=np.int64)
         self.t_final = np.zeros(B)
         self.j_final = np.zeros(B, dtype=np.int64)
@@ -272,8 +276,11 @@ class _Buffers:
         self.n_rejected = np.zeros(B, dtype=np.int64)
         self.log_n = np.zeros(B, dtype=np.int64)
         self.arc_n = np.zeros(B, dtype=np.int64)
-        self.grid_x = np.full((B, n_grid, n), np.nan)
-        self.grid_j = np.full((B, n_grid), -1, dtype=np.int64)
+        # with a distance to reduce, the grid's states are never written: no room for them
+        kept = 0 if reduce else n_grid
+        self.grid_x = np.full((B, kept, n), np.nan)
+        self.grid_j = np.full((B, kept), -1, dtype=np.int64)
+        self.grid_max = np.full(B, -np.inf if n_grid else np.nan)
         self.error_code = np.zeros(B, dtype=np.int64)
 
 
@@ -286,6 +293,7 @@ def _call(
     opts: SolverOptions,
     keep_steps: bool,
     grid: np.ndarray,
+    dist: np.ndarray,
     runs: np.ndarray,
     log_cap: int,
     arc_cap: int,
@@ -343,6 +351,8 @@ def _call(
         log_j,
         out.grid_x,
         out.grid_j,
+        dist,
+        out.grid_max,
         out.arc_n,
         arc_t,
         arc_j,
@@ -358,9 +368,9 @@ def _call(
         views = (
             rest[:7]
             + tuple(buf[a:b] for buf in rest[7:10])
-            + rest[10:13]
-            + tuple(buf[a:b] for buf in rest[13:16])
-            + rest[16:]
+            + rest[10:15]  # grid_x, grid_j, dist, grid_max, arc_n
+            + tuple(buf[a:b] for buf in rest[15:18])
+            + rest[18:]
         )
         jobs.append((np.ascontiguousarray(runs[a:b], dtype=np.int64), views))
     if len(jobs) == 1:

@@ -81,11 +81,18 @@ class SaveAt:
         Increasing times at which to keep the state (from the dense output). At a jump
         time the value before the jump (smallest ``j``) is kept. Points outside the
         horizon, or after a run stopped early, hold NaN with ``j = -1``.
+    max_distance : (sequence of int, sequence of int) or "estimation_error", optional
+        Keep, instead of the states on ``grid``, only each run's largest distance
+        ``sqrt(sum_i (x[a_i] - x[b_i])**2)`` over the grid points, computed while the
+        run is solved (``HybridSolution.grid_max``; NaN when a value is not finite or a
+        point was never reached). Memory no longer grows with the grid.
+        ``"estimation_error"`` is for :func:`etobs.simulate`: ``max |x - xhat|``.
 
     """
 
     steps: bool = True
     grid: Any = field(default=None)
+    max_distance: Any = field(default=None)
 
     def __post_init__(self) -> None:
         if self.grid is not None:
@@ -93,3 +100,46 @@ class SaveAt:
             if g.size and np.any(np.diff(g) <= 0):
                 raise InputError("`grid` must be strictly increasing")
             object.__setattr__(self, "grid", g)
+        d = self.max_distance
+        if d is None:
+            return
+        if self.grid is None:
+            raise InputError("`max_distance` needs a `grid`: the distance is taken on its points")
+        if isinstance(d, str):
+            if d != "estimation_error":
+                raise InputError(
+                    f"`max_distance` must be a pair of index lists or 'estimation_error'; got {d!r}"
+                )
+            return
+        pair = None
+        if isinstance(d, (tuple, list)) and len(d) == 2:
+            a, b = (np.asarray(side) for side in d)
+            if a.ndim == b.ndim == 1 and a.size == b.size > 0 and all(_ints(s) for s in (a, b)):
+                pair = (tuple(int(i) for i in a), tuple(int(i) for i in b))
+        if pair is None:
+            raise InputError(
+                f"`max_distance` must be two equal-length, non-empty lists of state indices (a, b); got {d!r}"
+            )
+        object.__setattr__(self, "max_distance", pair)
+
+    def distance_pairs(self, n: int) -> np.ndarray:
+        """``max_distance`` as rows ``(a_i, b_i)``, checked against the state size ``n``.
+
+        Shape ``(0, 2)`` when the grid's states are kept.
+        """
+        d = self.max_distance
+        if d is None:
+            return np.zeros((0, 2), dtype=np.int64)
+        if isinstance(d, str):
+            raise InputError(
+                "`max_distance='estimation_error'` needs an estimation problem: pass it to "
+                "etobs.simulate, or give the state indices (a, b) to a hybrid solve"
+            )
+        pairs = np.array(d, dtype=np.int64).T.copy()
+        if pairs.min() < 0 or pairs.max() >= n:
+            raise InputError(f"`max_distance` indices must lie in 0 .. {n - 1} (the state size); got {d!r}")
+        return pairs
+
+
+def _ints(a: np.ndarray) -> bool:
+    return a.dtype.kind in "iu"

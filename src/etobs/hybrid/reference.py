@@ -20,7 +20,7 @@ import numpy as np
 from etobs.errors import ModelError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.recorder import Recorder
-from etobs.hybrid.solution import HybridSolution
+from etobs.hybrid.solution import GridMax, HybridSolution, SavedGrid, max_over_grid
 from etobs.hybrid.solver import check_inputs, peak_probe
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import BatchedSystem, HybridSystem
@@ -68,6 +68,7 @@ def solve_reference(
     X, t0, t_end = check_inputs(system, x0, t_span)
     opts = options or SolverOptions()
     save = save or SaveAt()
+    dist = save.distance_pairs(system.n)
     B = X.shape[0]
     rec = Recorder(B, system.n, save, t0)
     status = np.full(B, Status.RUNNING, dtype=np.int64)
@@ -86,12 +87,21 @@ def solve_reference(
         x_final=x_final,
         jumps=rec.jump_log(),
         arcs=rec.arcs(),
-        grid=rec.saved_grid(),
+        grid=None if dist.size else rec.saved_grid(),
         n_steps=n_steps,
         n_rejected=np.zeros(B, dtype=np.int64),
         rule_names=system.rule_names,
         backend="scipy",
+        grid_max=_grid_max(rec.saved_grid(), dist),
     )
+
+
+def _grid_max(grid: SavedGrid | None, dist: np.ndarray) -> GridMax | None:
+    """``SaveAt(max_distance=...)`` from the grid's states (the engine folds it as it goes)."""
+    if grid is None or not dist.size:
+        return None
+    d = grid.x[..., dist[:, 0]] - grid.x[..., dist[:, 1]]
+    return GridMax(grid.t, max_over_grid(np.sqrt(np.sum(d * d, axis=-1))))
 
 
 class _Run:

@@ -79,6 +79,30 @@ class SavedGrid:
 
 
 @dataclass(frozen=True)
+class GridMax:
+    """Each run's largest distance over the save grid (``SaveAt(max_distance=...)``).
+
+    ``value[b]`` is the maximum over the points ``t`` of run ``b``; NaN when a value was
+    not finite or the run stopped before the last point.
+    """
+
+    t: np.ndarray
+    value: np.ndarray
+
+
+def max_over_grid(distance: np.ndarray) -> np.ndarray:
+    """Per run (axis 0), the maximum over the grid (axis 1); NaN unless every value is finite.
+
+    (NaN too for a grid of no point.) The compiled engine folds the same maximum point
+    by point (``_grid_keep`` in :mod:`etobs.hybrid._kernel_body`).
+    """
+    if distance.shape[1] == 0:
+        return np.full(distance.shape[0], np.nan)
+    finite = np.all(np.isfinite(distance), axis=1)
+    return np.where(finite, np.max(np.nan_to_num(distance, nan=-np.inf), axis=1), np.nan)
+
+
+@dataclass(frozen=True)
 class HybridSolution:
     """Solution of a batch of runs of one hybrid system.
 
@@ -93,7 +117,8 @@ class HybridSolution:
     arcs : tuple of HybridArc or None
         Full arcs (``SaveAt(steps=True)``).
     grid : SavedGrid or None
-        States on the save grid (``SaveAt(grid=...)``).
+        States on the save grid (``SaveAt(grid=...)``), unless only their distance's
+        maximum was kept (``SaveAt(max_distance=...)``): then ``grid_max``.
     n_steps, n_rejected : ndarray of int, shape (B,)
         Accepted and rejected steps of each run.
     rule_names : tuple of str
@@ -101,6 +126,8 @@ class HybridSolution:
     failures : tuple of str
         Per run, which model function failed and how (runs with status
         ``model_error``), else ``""``.
+    grid_max : GridMax or None
+        With ``SaveAt(max_distance=...)``.
 
     """
 
@@ -117,6 +144,7 @@ class HybridSolution:
     rule_names: tuple[str, ...]
     backend: str
     failures: tuple[str, ...] = ()
+    grid_max: GridMax | None = None
 
     @property
     def n_runs(self) -> int:
