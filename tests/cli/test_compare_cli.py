@@ -154,6 +154,14 @@ def test_process_pool_and_dask_give_the_same_table(tmp_path, dask_cluster):
     assert (pooled.computed, dask.computed) == (spec.n_runs, spec.n_runs) == (12, 12)
 
 
+def test_entries_that_differ_only_by_name_are_computed_once(tmp_path):
+    rules = [{"name": "dynamic", "kind": "base"}, {"name": "the same", "kind": "base"}]
+    spec = parse_compare_spec({**SPEC, "rules": rules, "networks": SPEC["networks"][:1]})
+    res = compare(spec, tmp_path, executor="serial")
+    assert res.complete and res.computed == 3
+    np.testing.assert_array_equal(res.entries[0].transmissions, res.entries[1].transmissions)
+
+
 def test_a_failing_chunk_is_reported_and_the_rest_runs(tmp_path, monkeypatch, capsys):
     import etobs.experiments.runner as runner
     from etobs import StaticRule

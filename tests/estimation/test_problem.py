@@ -156,6 +156,8 @@ def test_estimation_error_folded_during_the_solve_is_the_one_from_the_grid(backe
         InputError, match=r"kept only max \|x - xhat\| over its grid \(151 points on \[0.5, 2\] s\)"
     ):
         max_estimation_error(folded, (1.0, 2.0))
+    with pytest.raises(InputError, match=r"kept only max \|x - xhat\| over its grid \(SaveAt\(max_distance"):
+        folded.on_grid()
     with pytest.raises(
         InputError, match=r"must be 'estimation_error' \(max \|x - xhat\|\); got \(\(0,\), \(4,\)\)"
     ):

@@ -178,7 +178,8 @@ def test_executor_errors(tiny, tmp_path):
     with pytest.raises(
         InputError, match=r"`executor` must be one of \('serial', 'process', 'dask'\); got 'gpu'"
     ):
-        run_sweep(tiny, tmp_path, executor="gpu", progress=False)
+        run_sweep(tiny, tmp_path / "gpu", executor="gpu", progress=False)
+    assert not (tmp_path / "gpu").exists()  # checked before anything is written
     with pytest.raises(InputError, match=r"`workers` must be a positive integer; got 0"):
         run_sweep(tiny, tmp_path, workers=0, progress=False)
     with pytest.raises(InputError, match=r"needs `scheduler`"):

@@ -188,6 +188,16 @@ def test_max_distance_is_nan_for_a_run_that_stops_before_the_grid_ends(backend):
     assert np.isnan(sol.grid_max.value[0]) and sol.grid_max.value[1] == 0.0
 
 
+def test_max_distance_is_nan_when_grid_points_lie_before_the_start(backend):
+    pairs = ([0], [1])
+    args = (two_clocks(0.5, 0.3), [0.0, 0.0], (0.75, 2.0))
+    for grid in ([0.5, 1.0, 1.5], [0.2, 0.4]):
+        sol = solve(*args, save=SaveAt(steps=False, grid=grid, max_distance=pairs), backend=backend)
+        assert np.isnan(sol.grid_max.value[0])
+    sol = solve(*args, save=SaveAt(steps=False, grid=[1.0, 1.5], max_distance=pairs), backend=backend)
+    assert np.isfinite(sol.grid_max.value[0])
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

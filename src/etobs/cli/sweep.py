@@ -9,7 +9,7 @@ from typing import Any
 
 from etobs.cli._args import execution, execution_args
 from etobs.experiments import SweepResult, load_spec, run_sweep
-from etobs.experiments.store import atomic_write
+from etobs.experiments.store import atomic_write, last_line
 from etobs.experiments.tables import to_csv
 
 
@@ -44,7 +44,7 @@ def _report(result: SweepResult) -> int:
         f"{result.reused} reused); {len(result.failures)} failed chunks; results in {result.out}/"
     )
     for f in result.failures:
-        last = f["error"].strip().splitlines()[-1] if f["error"].strip() else "unknown error"
+        last = last_line(f)
         print(f"  failed: runs {f['runs'][0]}..{f['runs'][-1]} of chunk {f['key']}: {last}", file=sys.stderr)
     return 0 if result.complete else 1
 

@@ -9,6 +9,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError
 from etobs.estimation.result import EstimationResult
+from etobs.hybrid.solution import max_over_grid
 
 
 def _window(window: Any, result: EstimationResult) -> tuple[float, float]:
@@ -145,7 +146,5 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
             xhat = result.problem.psi(z.reshape(-1, z.shape[-1])).reshape(*z.shape[:-1], -1)
             dx = qb[..., lay.x] - xhat
             err = np.sqrt(np.einsum("bgi,bgi->bg", dx, dx))
-            out[a : a + block] = np.where(
-                np.all(np.isfinite(err), axis=1), np.max(np.nan_to_num(err, nan=-np.inf), axis=1), np.nan
-            )
+            out[a : a + block] = max_over_grid(err)
     return out

@@ -161,6 +161,11 @@ class EstimationResult:
     def on_grid(self) -> Trajectory:
         """States of every run on the save grid, arrays of shape ``(B, G, ...)``."""
         g = self.solution.grid
+        if g is None and self.solution.grid_max is not None:
+            raise InputError(
+                "this result kept only max |x - xhat| over its grid (SaveAt(max_distance=...)): "
+                "simulate with SaveAt(grid=...) and no max_distance to keep the states"
+            )
         if g is None:
             raise InputError("this result kept no grid: simulate with save=SaveAt(grid=...)")
         t = np.broadcast_to(g.t, g.j.shape)

@@ -24,6 +24,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.experiments.compare_spec import CompareSpec
 from etobs.experiments.pipeline import run_groups, stored
+from etobs.experiments.store import last_line
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,7 @@ class Comparison:
         for rule, network, why in self.skipped:
             lines += ["", f"Not run: {rule} / {network}: {why}."]
         for f in self.failures:
-            last = f["error"].strip().splitlines()[-1] if f["error"].strip() else "unknown error"
+            last = last_line(f)
             lines += ["", f"Failed: {f['where']}, runs {f['runs'][0]}..{f['runs'][-1]}: {last}"]
         return "\n".join(lines) + "\n"
 

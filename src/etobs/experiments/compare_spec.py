@@ -184,24 +184,19 @@ class CompareSpec(Experiment):
         return parse_compare_spec(raw)
 
     @cached_property
+    def _pairs(self) -> tuple[tuple[RuleEntry, NetworkEntry, str], ...]:
+        """Every (rule, network) pair, networks outer, with why it does not run (or ``""``)."""
+        return tuple((r, n, _why_not(r, n)) for n in self.networks for r in self.rules)
+
+    @property
     def entries(self) -> tuple[tuple[RuleEntry, NetworkEntry], ...]:
         """The (rule, network) pairs that run, in the order of the table."""
-        return tuple(
-            (r, n)
-            for n in self.networks
-            for r in self.rules
-            if not (r.observer_copy and n.network is not None)
-        )
+        return tuple((r, n) for r, n, why in self._pairs if not why)
 
     @property
     def skipped(self) -> tuple[tuple[str, str, str], ...]:
         """``(rule, network, why)`` of every pair that does not run."""
-        return tuple(
-            (r.name, n.name, COPY_NEEDS_IDEAL)
-            for n in self.networks
-            for r in self.rules
-            if r.observer_copy and n.network is not None
-        )
+        return tuple((r.name, n.name, why) for r, n, why in self._pairs if why)
 
     @property
     def n_groups(self) -> int:
@@ -246,6 +241,11 @@ class CompareSpec(Experiment):
         ]
         networks = [{"name": n.name, "network": repr(n.network)} for n in self.networks]
         return {**super().resolved(), "params": self.params, "rules": rules, "networks": networks}
+
+
+def _why_not(rule: RuleEntry, network: NetworkEntry) -> str:
+    """Why ``rule`` does not run on ``network`` (``""``: it runs)."""
+    return COPY_NEEDS_IDEAL if rule.observer_copy and network.network is not None else ""
 
 
 def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:

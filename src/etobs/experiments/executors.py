@@ -43,10 +43,7 @@ def execute(
     client: Any = None,
 ) -> None:
     """Run ``tasks`` of the experiment ``kind.from_raw(raw_spec)``, reporting each as it finishes."""
-    if executor not in EXECUTORS:
-        raise InputError(f"`executor` must be one of {EXECUTORS}; got {executor!r}")
-    if workers is not None and (not isinstance(workers, int) or workers < 1):
-        raise InputError(f"`workers` must be a positive integer; got {workers!r}")
+    check_execution(executor, workers)
     if not tasks:
         return
     job = (kind, raw_spec)
@@ -56,6 +53,14 @@ def execute(
         _process(tasks, job, on_done, on_error, workers)
     else:
         _dask(tasks, job, on_done, on_error, scheduler, client)
+
+
+def check_execution(executor: str, workers: int | None) -> None:
+    """Fail, naming the argument, on an unknown executor or a bad number of workers."""
+    if executor not in EXECUTORS:
+        raise InputError(f"`executor` must be one of {EXECUTORS}; got {executor!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise InputError(f"`workers` must be a positive integer; got {workers!r}")
 
 
 def _serial(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed) -> None:

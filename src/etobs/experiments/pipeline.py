@@ -18,7 +18,7 @@ from typing import Any
 
 from etobs.errors import InputError
 from etobs.experiments.common import Experiment, normalize
-from etobs.experiments.executors import execute
+from etobs.experiments.executors import check_execution, execute
 from etobs.experiments.progress import Progress
 from etobs.experiments.runner import Task
 from etobs.experiments.store import ResultStore, atomic_write, task_key
@@ -34,11 +34,18 @@ class Stored:
 
 
 def plan(spec: Experiment, store: ResultStore, size: int) -> tuple[list[Task], int]:
-    """Tasks for the runs not stored yet, and the number of runs already stored."""
-    tasks, reused = [], 0
+    """Tasks for the runs not stored yet, and the number of runs already stored.
+
+    Groups whose numbers are those of an earlier group (the same key: e.g. two entries
+    that differ only by name) are planned once; both read the same records.
+    """
+    tasks, reused, planned = [], 0, set()
     n = spec.initial_states.runs
     for g in range(spec.n_groups):
         key = task_key(spec, g)
+        if key in planned:  # a group with the same numbers as an earlier one (other names)
+            continue
+        planned.add(key)
         done = store.records(key, n)
         reused += len(done)
         missing = [k for k in range(n) if k not in done]
@@ -68,6 +75,7 @@ def run_groups(
     """
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
         raise InputError(f"`chunk` must be a positive integer (runs per chunk); got {chunk!r}")
+    check_execution(executor, workers)  # before anything is written
     spec.check()
     store = ResultStore(out)
     store.clean_temporary()
@@ -77,7 +85,7 @@ def run_groups(
     pending: dict[int, int] = {}
     for t in tasks:
         pending[t.group] = pending.get(t.group, 0) + 1
-    bar = Progress(spec.n_runs, spec.name, enabled=progress)
+    bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
     bar.update(done=reused)
     computed = 0
 

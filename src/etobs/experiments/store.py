@@ -34,6 +34,12 @@ def task_key(spec: Experiment, group: int) -> str:
     return hashlib.sha256(_canonical(ident).encode()).hexdigest()[:20]
 
 
+def last_line(failure: dict[str, Any]) -> str:
+    """The last line of a stored failure's error (the exception), for reports."""
+    text = str(failure.get("error", "")).strip()
+    return text.splitlines()[-1] if text else "unknown error"
+
+
 def atomic_write(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` so that readers see the old file or the whole new one."""
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.experiments.pipeline import run_groups, stored
 from etobs.experiments.spec import SweepSpec
-from etobs.experiments.store import ResultStore, atomic_write
+from etobs.experiments.store import ResultStore, atomic_write, last_line
 from etobs.experiments.tables import aggregate, flatten_params, run_rows, to_csv, to_markdown
 
 
@@ -167,7 +167,7 @@ def _write_outputs(result: SweepResult, started: str) -> None:
         to_markdown(result.aggregate, cols),
     ]
     for f in result.failures:
-        last = f["error"].strip().splitlines()[-1] if f["error"].strip() else ""
+        last = last_line(f)
         text.append(f"- failed: {f.get('where', '')} runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
     atomic_write(out / "report.md", "\n".join(text) + "\n")
 

@@ -243,6 +243,8 @@ def _solve_one(
     gnext = 0
     while gnext < n_grid and grid[gnext] < t0:
         gnext += 1
+    if dist.shape[0] > 0 and gnext > 0:  # points before t0 are never reached
+        grid_max[run] = np.nan
 
     if keep_steps:
         narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
