@@ -12,10 +12,13 @@ network, lose and apply the same packets).
     python benchmarks/bench_extensions.py            # engine: batch of 100, scipy: 2 runs, 5 s
     python benchmarks/bench_extensions.py --quick    # CI smoke: batch of 4, 1 scipy run, 0.5 s
 
-Before the batched numpy solver was retired, this benchmark compared against it (batch
-of 100, 5-s runs, one process, 2 engine threads): the engine was 52.9x faster per run
-with an input node, 22.4x with the copy hold, 106.7x with the network and 31.1x with
-the generalized rule, with the same transmissions and packet counts in every run.
+Before the batched numpy solver was retired, it was measured against the engine in one
+process of the last version that had both (batch of 100, 5-s runs, the solvers
+alternating three times per case): with 2 engine threads the engine was 36.5–45.2x
+faster per run with the copy hold, 29.1–35.9x with the generalized rule, 40.3–45.1x
+with an input node and 61.2–82.7x with the network (17.8–19.7x, 16.9–20.7x,
+19.8–24.1x and 32.5–44.0x on one thread each), with the same transmissions and packet
+counts in every run.
 
 The observer-copy hold sends about a thousand times a second on the robot arm (its
 held innovation drives ``yhat`` fast with the paper's gain), so its runs are a tenth of
