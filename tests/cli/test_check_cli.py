@@ -89,3 +89,20 @@ def test_check_with_a_designed_gain(tmp_path, capsys):
     assert main(["check", path]) == 0
     out = capsys.readouterr().out
     assert "certificate: all conditions hold" in out and "ultimate bound on |x - xhat|" in out
+
+
+def test_check_refuses_a_problem_the_theorems_do_not_cover(tmp_path, capsys):
+    # the robot arm with the observer-copy hold (Remark 3): no certificate, exit 2
+    factory = tmp_path / "copy_hold.py"
+    factory.write_text(
+        "from dataclasses import replace\nfrom etobs.examples import robot_arm\n\n"
+        "def problem(**kw):\n    return replace(robot_arm(**kw), hold='innovation')\n"
+    )
+    spec = tmp_path / "check.toml"
+    spec.write_text(f'[system]\nfactory = "{factory}:problem"\n[guarantees]\nE = [10.0, 20.0]\n')
+    with pytest.raises(SystemExit) as exc:
+        main(["check", str(spec)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "etobs: error: the paper's results (Theorems 1-4) do not cover this problem" in err
+    assert "the observer-copy hold" in err and "Traceback" not in err

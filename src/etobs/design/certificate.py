@@ -191,6 +191,7 @@ def certify(
     """
     if not isinstance(problem, EstimationProblem):
         raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
+    _covered(problem)
     rules = _rules(problem)
     N = len(rules)
     ds = None if d is None else [v.real(f"d[{i}]", di, lower=0.0, lower_open=True) for i, di in enumerate(d)]
@@ -240,6 +241,41 @@ def certify(
     if iss is None:
         return out
     return _with_iss(out, rules, iss, a_U, disturbance, ms)
+
+
+def _covered(problem: EstimationProblem) -> None:
+    """Refuse, naming the reason, a problem the paper's results do not cover.
+
+    The theorems hold for output nodes that hold ``y_i`` (eq. (5)) and reach the
+    observer at once, whole. A certificate for anything else would be a false
+    guarantee: the observer-copy hold shortens the inter-event times by orders of
+    magnitude on the robot arm, a lossy or delayed network raises the error, and input
+    nodes need Assumption 4's gain ``gamma_u``, which ``certify`` does not take.
+    """
+    why = []
+    if problem.hold == "innovation":
+        why.append(
+            "the observer-copy hold (nodes send ytilde - yhat; the paper's rules hold y_i, eq. (5), "
+            "and Remark 3 discusses the copy without results for it)"
+        )
+    if problem.input_nodes:
+        why.append(
+            f"{len(problem.input_nodes)} input node(s) (section 7.3: Assumption 4's ISS gain gamma_u "
+            "and the input rule's conditions, which certify does not check)"
+        )
+    if problem.network is not None:
+        ideal = [ln.instant and (ln.loss is None or ln.loss.rate == 0) for ln in problem.network.links]
+        lossy = [i for i, ok in enumerate(ideal) if not ok]
+        if lossy:
+            why.append(
+                f"a network with loss or delay on node(s) {lossy} (the theorems assume every "
+                "transmission reaches the observer at once; see docs/extensions.md)"
+            )
+    if why:
+        raise InputError(
+            "the paper's results (Theorems 1-4) do not cover this problem, so no certificate is given: "
+            + "; ".join(why)
+        )
 
 
 def _per_node(value: Any, n: int) -> list[Any]:
