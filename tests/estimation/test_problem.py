@@ -177,3 +177,12 @@ def test_estimation_error_with_psi_is_reduced_after_the_solve_and_says_so():
     np.testing.assert_array_equal(
         max_estimation_error(folded, (1.0, 3.0)), max_estimation_error(full, (1.0, 3.0))
     )
+
+
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
+def test_a_huge_initial_state_ends_with_a_status(backend):
+    # the audit's case: the engine raised ZeroDivisionError (the first step was 0)
+    with np.errstate(all="ignore"):
+        res = simulate(robot_arm(), [1e150, 0, 0, 0], 1.0, backend=backend)
+    assert res.status_labels()[0] in ("step_underflow", "nonfinite")
+    assert res.solution.t_final[0] < 1.0

@@ -133,6 +133,29 @@ def test_finite_escape_is_reported_per_run(backend):
     assert sol.x_final[1, 0] == pytest.approx(-1.0 / 3.0, rel=1e-9)
 
 
+def _explosive(t, x):
+    return 1e200 * x
+
+
+def test_a_first_step_of_zero_ends_the_run_with_a_status_not_a_hang_or_an_exception(backend):
+    # x' = 1e200 x: the scaled norm of the flow overflows, so the automatic first step is
+    # 0 (the engine divided by it: ZeroDivisionError; a zero step never moves t)
+    system = HybridSystem(n=1, n_rules=0, flow=_explosive, guard=_no_guard, jump=_keep)
+    sol = solve(system, [[1.0], [0.0]], (0.0, 1.0), backend=backend)
+    assert sol.status[0] in (Status.STEP_UNDERFLOW, Status.NONFINITE)
+    assert sol.t_final[0] < 1.0
+    assert sol.status[1] == Status.COMPLETED  # x = 0 stays 0
+
+
+def test_a_tiny_first_step_grows_and_completes(backend):
+    system = HybridSystem(
+        n=2, n_rules=0, flow=lambda t, x: np.array([x[1], -x[0]]), guard=_no_guard, jump=_keep
+    )
+    sol = solve(system, [1.0, 0.0], (0.0, 1.0), options=SolverOptions(first_step=1e-300), backend=backend)
+    assert sol.status.tolist() == [Status.COMPLETED]
+    assert sol.x_final[0, 0] == pytest.approx(np.cos(1.0), rel=1e-8)
+
+
 def test_max_steps_status(backend):
     # The scipy reference checks max_steps between flow segments only (after a jump),
     # so it stops later than the others, but with the same status.

@@ -71,7 +71,7 @@ FLOW_BEYOND_N_FLOW = 16 * FLOW + 3  # etobs.compile.functions.BEYOND_N_FLOW
 K_FLOW, K_GUARD = -1, -2
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def _system(slot, k, t, x, p, args, out):
     """Call the system's function ``slot`` (FLOW, GUARD, JUMP) by address into ``out``.
 
@@ -85,7 +85,7 @@ def _system(slot, k, t, x, p, args, out):
         store_i64(args[6], st if st >= 16 else 16 * slot + st)
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def run_args(shared, work, failure):
     """The run's addresses: flow, guard, jump, ``ia``, ``cf``, its scratch and its failure flag.
 
@@ -109,7 +109,7 @@ def _f8ptr(typingctx, addr):  # type: ignore[no-untyped-def]
     return sig, codegen
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def rows_at(base, offset, rows, cols):
     """A ``(rows, cols)`` array at ``base + 8 offset`` (an address into the thread's scratch).
 
@@ -120,31 +120,31 @@ def rows_at(base, offset, rows, cols):
     return numba.carray(_f8ptr(base + 8 * offset), (rows, cols))
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def vector_at(base, offset, size):
     """A 1-D array of ``size`` at ``base + 8 offset`` (see :func:`rows_at`)."""
     return numba.carray(_f8ptr(base + 8 * offset), (size,))
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def failed(args):
     """Whether a call of this run failed (its code is then at ``args[6]``)."""
     return load_i64(args[6]) != 0
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def flow(t, x, p, args, dx):
     """``dx = x'`` by the system's flow function."""
     _system(FLOW, K_FLOW, t, x, p, args, dx)
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def guard(t, x, p, args, g):
     """``g`` = every rule's event function."""
     _system(GUARD, K_GUARD, t, x, p, args, g)
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def jump(k, t, x, p, args):
     """Apply rule ``k``'s jump map to ``x`` in place."""
     _system(JUMP, k, t, x, p, args, x)
@@ -153,7 +153,7 @@ def jump(k, t, x, p, args):
 flow_call, guard_call, jump_call = flow, guard, jump
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def _dense_eval(Q, nq, dop853, x0, theta, out):
     """Continuous extension at ``theta`` (see ``Tableau.evaluate``: same operations).
 
@@ -173,7 +173,7 @@ def _dense_eval(Q, nq, dop853, x0, theta, out):
         out[i] = x0[i] + out[i]
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def _any_nonneg(g):
     for k in range(g.shape[0]):
         if g[k] >= 0.0:
@@ -181,7 +181,7 @@ def _any_nonneg(g):
     return False
 
 
-@numba.njit(inline="always")
+@numba.njit(inline="always", error_model="numpy")
 def _all_finite(x):
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
@@ -189,7 +189,7 @@ def _all_finite(x):
     return True
 
 
-@numba.njit
+@numba.njit(error_model="numpy")
 def _peak_probe(g0, gs, ns, S):
     """Earliest θ where a parabola through a negative local maximum reaches zero.
 
@@ -254,7 +254,8 @@ def build(method: str) -> Any:
         f"kernel_{method}",
         _BODY,
         lambda: tableau_constants(method),
-        {"jit": {}, "jit_nogil": {"nogil": True}},
+        # error_model="numpy": 1/0 gives inf (then a named status), never an exception
+        {"jit": {"error_model": "numpy"}, "jit_nogil": {"nogil": True, "error_model": "numpy"}},
         depends=tuple(
             here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "../compile/ccall.py")
         ),

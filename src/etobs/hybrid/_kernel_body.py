@@ -267,6 +267,12 @@ def _solve_one(
         remaining = t_end - t
         hh = min(min(h, max_step), remaining)
         last = hh >= remaining
+        if not last and not (hh > 0.0):
+            # a zero or NaN step never moves t, and h * factor stays zero (the automatic
+            # first step of a huge state, from the first step on); a tiny positive one
+            # grows by up to MAX_FACTOR per accepted step
+            st = NONFINITE if np.isnan(hh) else STEP_UNDERFLOW
+            break
         for i in range(n):
             K[0, i] = f[i]
         for q in range(nf, n):  # the stages' constant entries (a jump may have changed them)
