@@ -52,6 +52,13 @@ def integer(name: str, value: Any, *, lower: int | None = None, upper: int | Non
     return v
 
 
+def flag(name: str, value: Any) -> bool:
+    """Return ``value`` after checking it is ``True`` or ``False`` (not ``"false"``, not 0)."""
+    if not isinstance(value, bool | np.bool_):
+        raise InputTypeError(f"`{name}` must be true or false; got {value!r} ({type(value).__name__})")
+    return bool(value)
+
+
 def vector(name: str, value: Any, size: int | None = None) -> np.ndarray:
     """Return a finite float vector of the given size (read-only copy)."""
     try:

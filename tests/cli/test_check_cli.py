@@ -36,14 +36,16 @@ def test_check_prints_the_certificate(tmp_path, capsys):
 
 
 def test_check_fails_naming_the_node_and_condition(tmp_path, capsys):
-    assert main(["check", write(tmp_path, sigma2=1200.0)]) == 1
+    with pytest.warns(RuntimeWarning, match=r"sigma\*c = 1200\*0.001 = 1.2 >= 1: Theorem 1 needs"):
+        assert main(["check", write(tmp_path, sigma2=1200.0)]) == 1
     captured = capsys.readouterr()
     assert "FAIL sigma*c < 1 (Theorem 1) [node 1]: sigma*c = 1200*0.001 = 1.2" in captured.out
     assert (
         "etobs: condition failed: node 1: sigma*c < 1 (Theorem 1) (sigma*c = 1200*0.001 = 1.2)"
         in captured.err
     )
-    assert main(["check", write(tmp_path, sigma2=1200.0), "--json"]) == 1
+    with pytest.warns(RuntimeWarning, match=r"sigma\*c = 1200"):
+        assert main(["check", write(tmp_path, sigma2=1200.0), "--json"]) == 1
     data = json.loads(capsys.readouterr().out)
     assert data["ok"] is False and data["nu"] is None
     assert [c["node"] for c in data["conditions"] if not c["holds"]] == [1]

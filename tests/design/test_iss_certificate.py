@@ -84,7 +84,9 @@ def test_certificate_of_the_papers_parameters():
 
 
 def test_a_violated_condition_names_the_node():
-    cert = certify(robot_arm(sigma=(600.0, 1200.0)))
+    with pytest.warns(RuntimeWarning, match=r"node 1 \('sensor 2'\): sigma\*c = 1200\*0.001 = 1.2 >= 1"):
+        pb = robot_arm(sigma=(600.0, 1200.0))
+    cert = certify(pb)
     assert not cert.ok
     (fail,) = cert.failures()
     assert fail.node == 1 and fail.name == "sigma*c < 1 (Theorem 1)" and "1.2" in fail.detail

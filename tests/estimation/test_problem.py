@@ -186,3 +186,10 @@ def test_a_huge_initial_state_ends_with_a_status(backend):
         res = simulate(robot_arm(), [1e150, 0, 0, 0], 1.0, backend=backend)
     assert res.status_labels()[0] in ("step_underflow", "nonfinite")
     assert res.solution.t_final[0] < 1.0
+
+
+def test_sigma_c_of_one_or_more_warns_naming_the_node():
+    with pytest.warns(
+        RuntimeWarning, match=r"node 0 \('sensor 1'\): sigma\*c = 1000\*0.001 = 1 >= 1: Theorem 1"
+    ):
+        robot_arm(sigma=(1000.0, 600.0))

@@ -152,3 +152,15 @@ def test_robot_arm_network_repeats_the_arm():
     np.testing.assert_array_equal(
         net.transmissions.counts(2, 6), np.hstack([per_arm, per_arm[::-1], per_arm])
     )
+
+
+@pytest.mark.parametrize("name", ["noise", "disturbance"])
+def test_switches_must_be_booleans(name):
+    # a spec's noise = "false" (a string) counted as true, and runs.csv labelled it "false"
+    from etobs.errors import InputTypeError
+
+    with pytest.raises(InputTypeError, match=rf"`{name}` must be true or false; got 'false' \(str\)"):
+        robot_arm(**{name: "false"})
+    with pytest.raises(InputTypeError, match=rf"`{name}` must be true or false; got 1 \(int\)"):
+        robot_arm(**{name: 1})
+    robot_arm(**{name: False})

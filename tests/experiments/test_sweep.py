@@ -361,3 +361,16 @@ def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_
     assert read_runs(tmp_path / "one") == read_runs(tmp_path / "many")
     with pytest.raises(InputError, match=r"`run_ids` must be 2 non-negative integers"):
         simulate(spec.problem(0), [[0.5], [0.2]], 1.0, run_ids=[0])
+
+
+def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
+    raw = {
+        "name": "switch",
+        "system": {"factory": "robot_arm"},
+        "scenarios": [{"name": "quoted", "noise": "false"}],
+        "initial_states": {"low": [0.0] * 4, "high": [1.0] * 4, "runs": 1, "seed": 1},
+        "horizon": {"t_end": 0.1},
+    }
+    res = run_sweep(parse_spec(raw), tmp_path, executor="serial", progress=False)
+    assert not res.complete and res.runs == []
+    assert "`noise` must be true or false; got 'false' (str)" in res.failures[0]["error"]

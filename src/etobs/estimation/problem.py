@@ -134,6 +134,7 @@ class EstimationProblem:
         object.__setattr__(self, "layout", _layout(p, self.observer, nodes, inputs, self.network))
         _check_shapes(self)
         _check_noise(self)
+        _check_sigma_c(self)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
@@ -407,3 +408,19 @@ def _check_noise(pb: EstimationProblem) -> None:
                 RuntimeWarning,
                 stacklevel=3,
             )
+
+
+def _check_sigma_c(pb: EstimationProblem) -> None:
+    """Warn, naming the node, when ``sigma_i c_i >= 1``: no ``d_i`` satisfies Theorem 1."""
+    nodes = [("node", i, nd) for i, nd in enumerate(pb.nodes)]
+    nodes += [("input node", i, nd) for i, nd in enumerate(pb.input_nodes)]
+    for kind, i, nd in nodes:
+        sigma, c = getattr(nd.rule, "sigma", None), getattr(nd.rule, "c", None)
+        if sigma is None or c is None or sigma * c < 1:
+            continue
+        warnings.warn(
+            f"{kind} {i} ({nd.name!r}): sigma*c = {sigma:g}*{c:g} = {sigma * c:.6g} >= 1: Theorem 1 needs "
+            "sigma_i c_i < 1, so the paper's guarantees do not hold; lower sigma or c",
+            RuntimeWarning,
+            stacklevel=3,
+        )

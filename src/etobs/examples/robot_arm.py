@@ -91,8 +91,8 @@ def robot_arm(
 
     """
     gain = v.matrix("L", L, (4, 2))
-    amp_v = 0.02 * np.array([0.0, 1.0, 0.0, 1.0]) if disturbance else np.zeros(4)
-    amp_m = 0.01 * np.array([0.0, 1.0]) if noise else np.zeros(2)
+    amp_v = 0.02 * np.array([0.0, 1.0, 0.0, 1.0]) if v.flag("disturbance", disturbance) else np.zeros(4)
+    amp_m = 0.01 * np.array([0.0, 1.0]) if v.flag("noise", noise) else np.zeros(2)
 
     plant = Plant(f_p=_plant, h=_output, n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
     # the gain travels as the observer's parameters: another L compiles nothing
