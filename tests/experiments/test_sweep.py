@@ -3,6 +3,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -374,3 +375,99 @@ def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
     res = run_sweep(parse_spec(raw), tmp_path, executor="serial", progress=False)
     assert not res.complete and res.runs == []
     assert "`noise` must be true or false; got 'false' (str)" in res.failures[0]["error"]
+
+
+def _chunk_files(out):
+    return sorted(p for p in (out / "chunks").glob("*__*.json") if not p.name.endswith(".error.json"))
+
+
+def test_a_tampered_chunk_is_set_aside_and_recomputed(tiny, tmp_path):
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    before = read_runs(tmp_path)
+    target = _chunk_files(tmp_path)[0]
+    data = json.loads(target.read_text())
+    data["records"][0]["error"] = 123.0  # one number changed by hand
+    target.write_text(json.dumps(data))
+    with pytest.warns(
+        RuntimeWarning, match=r"was changed since it was written \(its checksum does not match\)"
+    ):
+        again = run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert (again.computed, again.reused) == (len(data["records"]), 20 - len(data["records"]))
+    assert read_runs(tmp_path) == before  # the tampered value is not used
+    assert (tmp_path / "set-aside" / target.name).is_file()
+
+
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [
+        ("[]", r"not a chunk of this version \(wrong structure\)"),
+        ('{"key": "x", "records": [], "sha256": "0"}', r"stored under key 'x', not its file's"),
+        ("{not json", r"unreadable"),
+    ],
+)
+def test_a_foreign_or_broken_chunk_is_set_aside_with_a_warning_not_a_traceback(tiny, tmp_path, text, why):
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    target = _chunk_files(tmp_path)[-1]
+    target.write_text(text)
+    with pytest.warns(RuntimeWarning, match=why):
+        again = run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert again.complete and again.computed > 0
+
+
+def test_a_second_writer_on_the_same_folder_is_refused(tiny, tmp_path):
+    from etobs.experiments.store import ResultStore
+
+    with ResultStore(tmp_path).lock():
+        with pytest.raises(
+            InputError, match=r"another sweep or comparison is writing to .* \(process \d+ holds"
+        ):
+            run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert run_sweep(tiny, tmp_path, executor="serial", progress=False).complete  # released
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads child processes from /proc (Linux)")
+def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
+    spec_file = tmp_path / "slow.toml"
+    spec_file.write_text(
+        f'name = "slow"\n[system]\nfactory = "{FACTORY}"\nfixed = {{ delay = 2.0 }}\n'
+        "[initial_states]\nlow = [-1.0]\nhigh = [1.0]\nruns = 40\nseed = 5\n[horizon]\nt_end = 1.0\n"
+    )
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "etobs.cli.main", "sweep", str(spec_file), "--out", str(out)]
+    cmd += ["--workers", "2", "--chunk-size", "1", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children: set[int] = set()
+    deadline = time.monotonic() + 60
+    while len(children) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+        children = _workers_of(proc.pid)
+    assert len(children) >= 2, "the pool did not start"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    deadline = time.monotonic() + 30
+    while children and time.monotonic() < deadline:
+        time.sleep(0.2)
+        children = {pid for pid in children if _alive(pid)}
+    assert not children, f"workers {sorted(children)} outlived their driver"
+
+
+def _workers_of(pid):
+    """Child processes of ``pid`` running a multiprocessing spawn main (Linux /proc)."""
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            cmdline = (stat.parent / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and b"spawn_main" in cmdline:
+            out.add(int(stat.parent.name))
+    return out
+
+
+def _alive(pid):
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import time
 import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -87,9 +89,24 @@ def _process(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed, w
                 on_error(task, f"the worker process running this chunk died {attempt} times in a row")
 
 
-def _worker_init() -> None:
-    """Pool workers are the parallelism: the compiled backend runs one thread in each."""
+def _worker_init(driver: int) -> None:
+    """Pool workers are the parallelism: the compiled backend runs one thread in each.
+
+    A worker also ends when its driver (process ``driver``) dies, killed say: it checks
+    once a second that its parent is still the driver, from the start (a driver killed
+    while the worker was starting up leaves it another parent already).
+    """
     os.environ["NUMBA_NUM_THREADS"] = "1"
+    if os.getppid() != driver:
+        os._exit(3)
+
+    def watch() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != driver:
+                os._exit(3)
+
+    threading.Thread(target=watch, name="etobs-driver-watch", daemon=True).start()
 
 
 def _pool_round(
@@ -97,7 +114,9 @@ def _pool_round(
 ) -> list[Task]:
     """Run ``tasks`` on a fresh pool; return those lost because a worker died."""
     lost: list[Task] = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),)
+    ) as pool:
         futures = {pool.submit(run_task, *job, t): t for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]

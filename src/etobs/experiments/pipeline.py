@@ -78,48 +78,49 @@ def run_groups(
     check_execution(executor, workers)  # before anything is written
     spec.check()
     store = ResultStore(out)
-    store.clean_temporary()
-    written = normalize({"as_given": spec.raw, "resolved": spec.resolved()}, ints_as_floats=False)
-    atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
-    tasks, reused = plan(spec, store, chunk or spec.chunk_size)
-    pending: dict[int, int] = {}
-    for t in tasks:
-        pending[t.group] = pending.get(t.group, 0) + 1
-    bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
-    bar.update(done=reused)
-    computed = 0
+    with store.lock():
+        store.clean_temporary()  # the folder is held: only dead writers leave temporary files
+        written = normalize({"as_given": spec.raw, "resolved": spec.resolved()}, ints_as_floats=False)
+        atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
+        tasks, reused = plan(spec, store, chunk or spec.chunk_size)
+        pending: dict[int, int] = {}
+        for t in tasks:
+            pending[t.group] = pending.get(t.group, 0) + 1
+        bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
+        bar.update(done=reused)
+        computed = 0
 
-    def finished(task: Task) -> None:
-        pending[task.group] -= 1
-        if pending[task.group] == 0 and on_group is not None:
-            on_group(task.group, store.records(task.key, spec.initial_states.runs))
+        def finished(task: Task) -> None:
+            pending[task.group] -= 1
+            if pending[task.group] == 0 and on_group is not None:
+                on_group(task.group, store.records(task.key, spec.initial_states.runs))
 
-    def done(task: Task, records: list[dict[str, Any]]) -> None:
-        nonlocal computed
-        store.write(task.key, task.runs, records)
-        computed += len(records)
-        bar.update(done=len(records))
-        finished(task)
+        def done(task: Task, records: list[dict[str, Any]]) -> None:
+            nonlocal computed
+            store.write(task.key, task.runs, records)
+            computed += len(records)
+            bar.update(done=len(records))
+            finished(task)
 
-    def failed(task: Task, message: str) -> None:
-        store.write_error(task.key, task.runs, message, spec.where(task.group))
-        bar.update(failed=len(task.runs))
-        finished(task)
+        def failed(task: Task, message: str) -> None:
+            store.write_error(task.key, task.runs, message, spec.where(task.group))
+            bar.update(failed=len(task.runs))
+            finished(task)
 
-    try:
-        execute(
-            tasks,
-            type(spec),
-            spec.raw,
-            done,
-            failed,
-            executor=executor,
-            workers=workers,
-            scheduler=scheduler,
-            client=client,
-        )
-    finally:
-        bar.close()
+        try:
+            execute(
+                tasks,
+                type(spec),
+                spec.raw,
+                done,
+                failed,
+                executor=executor,
+                workers=workers,
+                scheduler=scheduler,
+                client=client,
+            )
+        finally:
+            bar.close()
     return store, computed, reused
 
 

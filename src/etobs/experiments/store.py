@@ -7,20 +7,30 @@ Layout of an output folder::
     chunks/KEY__A-B.json        records of runs A..B of one group (a sweep's row under a
                                 scenario, a comparison's rule on a network)
     chunks/KEY__A-B.error.json  the error of a chunk that failed
+    set-aside/         chunks found damaged, changed or foreign (a warning says so)
+    .lock              held by the one process writing to the folder
 
 ``KEY`` is a hash of the spec's identity and the group's, so results of a changed spec
-are never mixed with old ones, and a rerun finds what is already done.
+are never mixed with old ones, and a rerun finds what is already done. A chunk file
+carries the SHA-256 of its key and records; one that does not match, has another
+structure or another key is moved to ``set-aside/`` with a warning and its runs are
+computed again.
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
 import tempfile
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from etobs.errors import InputError
 from etobs.experiments.common import Experiment
 
 
@@ -32,6 +42,26 @@ def task_key(spec: Experiment, group: int) -> str:
     """Hash of everything that determines the numbers of one group."""
     ident = {"spec": spec.identity(), "kwargs": spec.group_identity(group)}
     return hashlib.sha256(_canonical(ident).encode()).hexdigest()[:20]
+
+
+def _digest(body: dict[str, Any]) -> str:
+    return hashlib.sha256(_canonical(body).encode()).hexdigest()
+
+
+def _chunk_problem(data: Any, key: str) -> str:
+    """What is wrong with a stored chunk, or ``""``."""
+    if not isinstance(data, dict) or set(data) != {"key", "records", "sha256"}:
+        return "not a chunk of this version (wrong structure)"
+    if data["key"] != key:
+        return f"stored under key {data['key']!r}, not its file's {key!r}"
+    recs = data["records"]
+    if not isinstance(recs, list) or not all(
+        isinstance(r, dict) and isinstance(r.get("run"), int) for r in recs
+    ):
+        return "not a chunk of this version (wrong records)"
+    if data["sha256"] != _digest({"key": data["key"], "records": recs}):
+        return "changed since it was written (its checksum does not match)"
+    return ""
 
 
 def last_line(failure: dict[str, Any]) -> str:
@@ -68,10 +98,41 @@ class ResultStore:
         return f"{key}__{runs[0]:06d}-{runs[-1]:06d}"
 
     def write(self, key: str, runs: tuple[int, ...], records: list[dict[str, Any]]) -> None:
-        """Persist a finished chunk (and forget an earlier failure of the same runs)."""
+        """Persist a finished chunk (and forget an earlier failure of the same runs).
+
+        The file carries the SHA-256 of its key and records, checked when it is read.
+        """
         name = self._name(key, runs)
-        atomic_write(self.chunks / f"{name}.json", _canonical({"key": key, "records": records}))
+        body = {"key": key, "records": records}
+        atomic_write(self.chunks / f"{name}.json", _canonical({**body, "sha256": _digest(body)}))
         (self.chunks / f"{name}.error.json").unlink(missing_ok=True)
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the folder for one writer; a second sweep or comparison on it is refused.
+
+        Held, the folder's temporary files are this writer's own or a dead writer's, so
+        they may be removed (:meth:`clean_temporary`).
+        """
+        path = self.out / ".lock"
+        fh = open(path, "a+")
+        try:
+            try:
+                fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                fh.seek(0)
+                holder = fh.read().strip() or "unknown"
+                raise InputError(
+                    f"another sweep or comparison is writing to {str(self.out)!r} (process {holder} "
+                    f"holds {str(path)!r}): wait for it to finish, or use another output folder"
+                ) from None
+            fh.seek(0)
+            fh.truncate()
+            fh.write(str(os.getpid()))
+            fh.flush()
+            yield
+        finally:
+            fh.close()  # releases the lock
 
     def write_error(self, key: str, runs: tuple[int, ...], error: str, where: str = "") -> None:
         """Record a failed chunk with its error (``where``: its row and scenario, for reports)."""
@@ -90,14 +151,35 @@ class ResultStore:
         for path in sorted(self.chunks.glob(f"{key}__*.json")):
             if path.name.endswith(".error.json"):
                 continue
-            try:
-                data = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError):
-                continue  # unreadable: the runs will be computed again
+            data = self._checked(path, key)
+            if data is None:
+                continue  # set aside: the runs will be computed again
             for rec in data["records"]:
                 if runs is None or int(rec["run"]) < runs:
                     out.setdefault(int(rec["run"]), rec)
         return out
+
+    def _checked(self, path: Path, key: str) -> dict[str, Any] | None:
+        """The chunk at ``path`` if it is whole and its own, else ``None`` (set aside, with a warning)."""
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            return None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            why = f"unreadable ({exc})"
+        else:
+            why = _chunk_problem(data, key)
+            if not why:
+                return data
+        aside = self.out / "set-aside"
+        aside.mkdir(exist_ok=True)
+        path.replace(aside / path.name)
+        warnings.warn(
+            f"chunk {path.name} was {why}: moved to {str(aside)!r}; its runs are computed again",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
 
     def errors(self, key: str, present: set[int], runs: int) -> list[dict[str, Any]]:
         """Failures of ``key`` still standing: some of their runs below ``runs`` are missing.
@@ -108,7 +190,11 @@ class ResultStore:
         for path in sorted(self.chunks.glob(f"{key}__*.error.json")):
             try:
                 err = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError):
+                ok = isinstance(err, dict) and all(isinstance(r, int) for r in err["runs"])
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError):
+                ok = False
+            if not ok:  # not an error record of ours: its runs are simply retried
+                path.unlink(missing_ok=True)
                 continue
             if set(err["runs"]) <= present:
                 path.unlink(missing_ok=True)
