@@ -280,7 +280,7 @@ def test_more_input_checks():
     ("change", "reason"),
     [
         ({"hold": "innovation"}, r"the observer-copy hold \(nodes send ytilde - yhat"),
-        ({"network": "lossy"}, r"a network with loss or delay on node\(s\) \[0\]"),
+        ({"network": "lossy"}, r"a network with loss or delay on every node"),
         ({"network": "late sensor 2"}, r"a network with loss or delay on node\(s\) \[1\]"),
         ({"input_nodes": "one"}, r"1 input node\(s\) \(section 7.3: Assumption 4's ISS gain gamma_u"),
     ],

@@ -267,8 +267,9 @@ def _covered(problem: EstimationProblem) -> None:
         ideal = [ln.instant and (ln.loss is None or ln.loss.rate == 0) for ln in problem.network.links]
         lossy = [i for i, ok in enumerate(ideal) if not ok]
         if lossy:
+            where = "every node" if len(ideal) == 1 else f"node(s) {lossy}"
             why.append(
-                f"a network with loss or delay on node(s) {lossy} (the theorems assume every "
+                f"a network with loss or delay on {where} (the theorems assume every "
                 "transmission reaches the observer at once; see docs/extensions.md)"
             )
     if why:

@@ -406,7 +406,7 @@ def _check_noise(pb: EstimationProblem) -> None:
                 f"m = {bound:g}: section 6.2's condition fails, so noise alone can trigger transmissions; "
                 "raise eps",
                 RuntimeWarning,
-                stacklevel=3,
+                stacklevel=4,  # the user's EstimationProblem(...), through __init__ and __post_init__
             )
 
 
@@ -422,5 +422,5 @@ def _check_sigma_c(pb: EstimationProblem) -> None:
             f"{kind} {i} ({nd.name!r}): sigma*c = {sigma:g}*{c:g} = {sigma * c:.6g} >= 1: Theorem 1 needs "
             "sigma_i c_i < 1, so the paper's guarantees do not hold; lower sigma or c",
             RuntimeWarning,
-            stacklevel=3,
+            stacklevel=4,  # the user's EstimationProblem(...), through __init__ and __post_init__
         )

@@ -59,7 +59,7 @@ _SOLVER_KEYS = {
 DEFAULT_CHUNK = 20
 #: Format of the stored records; part of every result key, so records written in an
 #: earlier format are never mixed with new ones.
-RECORD_FORMAT = 2
+RECORD_FORMAT = 3
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ import numpy as np
 
 from etobs.errors import InputError
 from etobs.experiments.compare_spec import CompareSpec
-from etobs.experiments.pipeline import run_groups, stored
+from etobs.experiments.pipeline import experiment_folder, run_groups, stored
 from etobs.experiments.store import last_line
 
 
@@ -268,25 +268,26 @@ def compare(
         if on_entry is not None:
             on_entry(entry(g, records.values()))
 
-    store, computed, reused = run_groups(
-        spec,
-        out,
-        executor=executor,
-        workers=workers,
-        scheduler=scheduler,
-        client=client,
-        chunk=chunk,
-        progress=progress,
-        on_group=report,
-    )
-    got = stored(spec, store)
-    return Comparison(
-        spec=spec,
-        out=store.out,
-        node_names=names,
-        entries=tuple(entry(s.group, s.records.values()) for s in got),
-        skipped=spec.skipped,
-        failures=tuple(f for s in got for f in s.failures),
-        computed=computed,
-        reused=reused,
-    )
+    with experiment_folder(spec, out, executor=executor, workers=workers, chunk=chunk) as store:
+        computed, reused = run_groups(
+            spec,
+            store,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            client=client,
+            chunk=chunk,
+            progress=progress,
+            on_group=report,
+        )
+        got = stored(spec, store)
+        return Comparison(
+            spec=spec,
+            out=store.out,
+            node_names=names,
+            entries=tuple(entry(s.group, s.records.values()) for s in got),
+            skipped=spec.skipped,
+            failures=tuple(f for s in got for f in s.failures),
+            computed=computed,
+            reused=reused,
+        )

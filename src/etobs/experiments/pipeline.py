@@ -1,17 +1,19 @@
 """One pipeline for every experiment: plan the missing chunks, run them, store each one.
 
-:func:`run_groups` serves the sweep (:func:`~etobs.experiments.sweep.run_sweep`) and the
-rule comparison (:func:`~etobs.experiments.compare.compare`) alike: the chunks of every
-group of an :class:`~etobs.experiments.common.Experiment` run on the chosen executor
-(this process, a local process pool or a Dask cluster) and are written to the chunk
-store as they arrive, so an interrupted experiment resumes with what it finished.
+:func:`experiment_folder` holds the output folder, and :func:`run_groups` serves the
+sweep (:func:`~etobs.experiments.sweep.run_sweep`) and the rule comparison
+(:func:`~etobs.experiments.compare.compare`) alike: the chunks of every group of an
+:class:`~etobs.experiments.common.Experiment` run on the chosen executor (this process,
+a local process pool or a Dask cluster) and are written to the chunk store as they
+arrive, so an interrupted experiment resumes with what it finished.
 :func:`stored` reads them back.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,24 +56,16 @@ def plan(spec: Experiment, store: ResultStore, size: int) -> tuple[list[Task], i
     return tasks, reused
 
 
-def run_groups(
-    spec: Experiment,
-    out: str | Path,
-    *,
-    executor: str = "process",
-    workers: int | None = None,
-    scheduler: str | None = None,
-    client: Any = None,
-    chunk: int | None = None,
-    progress: bool = True,
-    on_group: Callable[[int, dict[int, dict[str, Any]]], None] | None = None,
-) -> tuple[ResultStore, int, int]:
-    """Compute the runs of ``spec`` missing from ``out``; return the store, computed, reused.
+@contextmanager
+def experiment_folder(
+    spec: Experiment, out: str | Path, *, executor: str, workers: int | None, chunk: int | None
+) -> Iterator[ResultStore]:
+    """The output folder of ``spec``, held for this process (:meth:`ResultStore.lock`).
 
-    ``out/spec.json`` records the spec as given and resolved. ``on_group(g, records)`` is
-    called once every chunk of group ``g`` computed by this call has been stored or has
-    failed, with the group's stored records by run.
-    Parameters as in :func:`~etobs.experiments.sweep.run_sweep`.
+    The executor settings and the spec are checked first, so nothing is written for bad
+    input. Held, the temporary files of dead writers are removed and ``spec.json``
+    records the spec as given and resolved. Run :func:`run_groups`, read the results back
+    and write the outputs inside, so no other writer can interleave.
     """
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1):
         raise InputError(f"`chunk` must be a positive integer (runs per chunk); got {chunk!r}")
@@ -82,46 +76,68 @@ def run_groups(
         store.clean_temporary()  # the folder is held: only dead writers leave temporary files
         written = normalize({"as_given": spec.raw, "resolved": spec.resolved()}, ints_as_floats=False)
         atomic_write(store.out / "spec.json", json.dumps(written, indent=2, sort_keys=True) + "\n")
-        tasks, reused = plan(spec, store, chunk or spec.chunk_size)
-        pending: dict[int, int] = {}
-        for t in tasks:
-            pending[t.group] = pending.get(t.group, 0) + 1
-        bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
-        bar.update(done=reused)
-        computed = 0
+        yield store
 
-        def finished(task: Task) -> None:
-            pending[task.group] -= 1
-            if pending[task.group] == 0 and on_group is not None:
-                on_group(task.group, store.records(task.key, spec.initial_states.runs))
 
-        def done(task: Task, records: list[dict[str, Any]]) -> None:
-            nonlocal computed
-            store.write(task.key, task.runs, records)
-            computed += len(records)
-            bar.update(done=len(records))
-            finished(task)
+def run_groups(
+    spec: Experiment,
+    store: ResultStore,
+    *,
+    executor: str = "process",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    chunk: int | None = None,
+    progress: bool = True,
+    on_group: Callable[[int, dict[int, dict[str, Any]]], None] | None = None,
+) -> tuple[int, int]:
+    """Compute the runs of ``spec`` missing from ``store``; return how many were computed and reused.
 
-        def failed(task: Task, message: str) -> None:
-            store.write_error(task.key, task.runs, message, spec.where(task.group))
-            bar.update(failed=len(task.runs))
-            finished(task)
+    Call it inside :func:`experiment_folder` (which checks the arguments).
+    ``on_group(g, records)`` is called once every chunk of group ``g`` computed by this
+    call has been stored or has failed, with the group's stored records by run. Parameters as in
+    :func:`~etobs.experiments.sweep.run_sweep`.
+    """
+    tasks, reused = plan(spec, store, chunk or spec.chunk_size)
+    pending: dict[int, int] = {}
+    for t in tasks:
+        pending[t.group] = pending.get(t.group, 0) + 1
+    bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
+    bar.update(done=reused)
+    computed = 0
 
-        try:
-            execute(
-                tasks,
-                type(spec),
-                spec.raw,
-                done,
-                failed,
-                executor=executor,
-                workers=workers,
-                scheduler=scheduler,
-                client=client,
-            )
-        finally:
-            bar.close()
-    return store, computed, reused
+    def finished(task: Task) -> None:
+        pending[task.group] -= 1
+        if pending[task.group] == 0 and on_group is not None:
+            on_group(task.group, store.records(task.key, spec.initial_states.runs))
+
+    def done(task: Task, records: list[dict[str, Any]]) -> None:
+        nonlocal computed
+        store.write(task.key, task.runs, records)
+        computed += len(records)
+        bar.update(done=len(records))
+        finished(task)
+
+    def failed(task: Task, message: str) -> None:
+        store.write_error(task.key, task.runs, message, spec.where(task.group))
+        bar.update(failed=len(task.runs))
+        finished(task)
+
+    try:
+        execute(
+            tasks,
+            type(spec),
+            spec.raw,
+            done,
+            failed,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            client=client,
+        )
+    finally:
+        bar.close()
+    return computed, reused
 
 
 def stored(spec: Experiment, store: ResultStore) -> list[Stored]:

@@ -19,7 +19,6 @@ computed again.
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import os
@@ -31,6 +30,11 @@ from pathlib import Path
 from typing import Any
 
 from etobs.errors import InputError
+
+try:
+    import fcntl
+except ImportError:  # not POSIX (Windows): the folder is not locked, and lock() says so
+    fcntl = None  # type: ignore[assignment]
 from etobs.experiments.common import Experiment
 
 
@@ -115,6 +119,15 @@ class ResultStore:
         they may be removed (:meth:`clean_temporary`).
         """
         path = self.out / ".lock"
+        if fcntl is None:
+            warnings.warn(
+                f"no file locking on this platform: {str(self.out)!r} is not protected from a second "
+                "writer; run one sweep or comparison per folder",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            yield
+            return
         fh = open(path, "a+")
         try:
             try:
@@ -126,6 +139,10 @@ class ResultStore:
                     f"another sweep or comparison is writing to {str(self.out)!r} (process {holder} "
                     f"holds {str(path)!r}): wait for it to finish, or use another output folder"
                 ) from None
+            except OSError as exc:  # a file system without locks (some network mounts)
+                raise InputError(
+                    f"cannot lock {str(path)!r} ({exc}): use an output folder on a local disk"
+                ) from exc
             fh.seek(0)
             fh.truncate()
             fh.write(str(os.getpid()))
@@ -173,7 +190,13 @@ class ResultStore:
                 return data
         aside = self.out / "set-aside"
         aside.mkdir(exist_ok=True)
-        path.replace(aside / path.name)
+        target, k = aside / path.name, 1
+        while target.exists():  # keep every damaged copy
+            target, k = aside / f"{path.name}.{k}", k + 1
+        try:
+            path.replace(target)
+        except FileNotFoundError:
+            return None
         warnings.warn(
             f"chunk {path.name} was {why}: moved to {str(aside)!r}; its runs are computed again",
             RuntimeWarning,

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
-from etobs.experiments.pipeline import run_groups, stored
+from etobs.experiments.pipeline import experiment_folder, run_groups, stored
 from etobs.experiments.spec import SweepSpec
 from etobs.experiments.store import ResultStore, atomic_write, last_line
 from etobs.experiments.tables import aggregate, flatten_params, run_rows, to_csv, to_markdown
@@ -90,18 +90,19 @@ def run_sweep(
     if not isinstance(spec, SweepSpec):
         raise InputError(f"`spec` must be a SweepSpec (see load_spec); got {type(spec).__name__}")
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    store, computed, reused = run_groups(
-        spec,
-        out,
-        executor=executor,
-        workers=workers,
-        scheduler=scheduler,
-        client=client,
-        chunk=chunk,
-        progress=progress,
-    )
-    result = collect(spec, store, computed=computed, reused=reused)
-    _write_outputs(result, started)
+    with experiment_folder(spec, out, executor=executor, workers=workers, chunk=chunk) as store:
+        computed, reused = run_groups(
+            spec,
+            store,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            client=client,
+            chunk=chunk,
+            progress=progress,
+        )
+        result = collect(spec, store, computed=computed, reused=reused)
+        _write_outputs(result, started)
     return result
 
 
