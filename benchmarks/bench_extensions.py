@@ -35,6 +35,7 @@ from dataclasses import replace
 import numba
 import numpy as np
 
+from _agree import expect, status
 from etobs import Link, Network, SaveAt, simulate
 from etobs.estimation import transmission_counts
 from etobs.examples import random_initial_states, robot_arm
@@ -107,6 +108,8 @@ def main() -> None:
         ref, ts = timed(lambda pb=pb, T=T: simulate(pb, x0[:ref_runs], T, backend="scipy", save=save))
         shared = simulate(pb, x0[:ref_runs], T, backend="engine", save=save)
         ok = eng.ok and ref.ok
+        expect(ok, f"{name}: every run completed")
+        expect(same_outcome(shared, ref), f"{name}: engine and scipy transmissions and packets")
         ratio = (ts / ref_runs) / (te / runs)
         n_tx = int(transmission_counts(eng).sum())
         print(
@@ -117,3 +120,4 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    raise SystemExit(status())

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from _agree import expect, status
 from etobs import SaveAt, SolverOptions, simulate
 from etobs.estimation import transmission_counts
 from etobs.examples import random_initial_states, robot_arm
@@ -80,6 +81,7 @@ def main() -> None:
     print(f"ratio per run: scipy/engine {per_run['scipy'] / per_run['engine']:.1f}x")
     sub_engine = run("engine", x0[:ref_runs])
     same_es, gap_es = agreement(sub_engine, res["scipy"])
+    expect(same_es, f"robot arm: engine and scipy transmission counts on {ref_runs} runs")
     print(f"transmissions: mean {transmission_counts(res['engine']).sum(1).mean():.1f} per run")
     print(
         f"engine and scipy agree on the shared {ref_runs} runs: {same_es}, max event-time gap {gap_es:.2e} s"
@@ -123,3 +125,4 @@ def _threads() -> int:
 
 if __name__ == "__main__":
     main()
+    raise SystemExit(status())

@@ -27,6 +27,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from _agree import expect, status  # noqa: E402 (a sibling module of this script)
+
 
 def per_run(quick: bool) -> None:
     from etobs import SolverOptions, simulate
@@ -45,6 +47,7 @@ def per_run(quick: bool) -> None:
     ref = simulate(pb, X[:n_scipy], t_end, backend="scipy")
     t_ref = (time.perf_counter() - t) / n_scipy
     same, gap = agreement(eng, ref, n_scipy, pb.n_nodes)
+    expect(same, f"user model: engine and scipy transmission counts on {n_scipy} runs")
     print(
         f"user model, {t_end:g} s horizon: engine {t_eng * 1e3:.2f} ms/run ({n_engine} runs, "
         f"{eng.backend}), scipy {t_ref * 1e3:.1f} ms/run ({n_scipy} runs)"
@@ -139,3 +142,4 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    raise SystemExit(status())
