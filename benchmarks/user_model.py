@@ -11,7 +11,17 @@ import math
 
 import numpy as np
 
-from etobs import Custom, DynamicRule, EstimationProblem, FunctionSignal, Linear, Node, Plant, Quadratic
+from etobs import (
+    Custom,
+    DynamicRule,
+    EstimationProblem,
+    FunctionSignal,
+    Linear,
+    Node,
+    Plant,
+    Quadratic,
+    factory,
+)
 from etobs.model import luenberger
 
 K = 0.4  # coupling
@@ -39,6 +49,7 @@ def gamma(s):
     return s * s * (1.0 + s)
 
 
+@factory  # a spec may name it: system.factory = "path/to/user_model.py:problem"
 def problem(damping: float = 0.3) -> EstimationProblem:
     """The estimation problem; ``damping`` travels in ``params`` (no recompile)."""
     plant = Plant(

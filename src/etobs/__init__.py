@@ -53,9 +53,11 @@ _EXPORTS = {
     "TriggerRule": "etobs.model",
     "Zero": "etobs.model",
     "luenberger": "etobs.model",
+    "factory": "etobs._spec",
 }
 
 if TYPE_CHECKING:
+    from etobs._spec import factory
     from etobs.estimation import (
         EstimationProblem,
         EstimationResult,
@@ -152,6 +154,7 @@ __all__ = [
     "TriggerRule",
     "Zero",
     "__version__",
+    "factory",
     "input_transmission_counts",
     "inter_event_times",
     "luenberger",

@@ -1,11 +1,22 @@
-"""Validation of specs given as data (parsed TOML): shared by sweeps, comparisons, checks and deployments.
+"""Specs given as data (TOML): reading them safely, validating them, and what they may call.
 
-Every error is a :class:`SpecError` that names the offending key.
+Shared by sweeps, comparisons, checks and deployments. Every error is a
+:class:`SpecError` that names the offending key (or the file).
+
+A spec names code: ``system.factory`` is a function that etobs imports and calls with
+the spec's arguments. Only functions marked with :func:`factory` may be named, so a spec
+cannot call ``subprocess:run`` or any other function that was not written to be one
+(see ``docs/specs.md``). A spec must still be trusted like the code it names.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import datetime
+import math
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -14,6 +25,130 @@ from etobs.errors import InputError
 
 class SpecError(InputError):
     """A spec is invalid; the message names the offending key."""
+
+
+#: Largest spec file read, in bytes. Specs are a few kB; a limit keeps reading bounded
+#: (``etobs sweep /dev/zero`` read until memory ran out).
+MAX_SPEC_BYTES = 1 << 20
+#: Deepest nesting of tables and arrays in a spec. The formats need 4 (``[system]``
+#: ``params`` ``{ delay = { uniform = [...] } }``); a per-node list of lists is 5. Deep
+#: nesting otherwise reaches Python's recursion limit inside the TOML parser.
+MAX_DEPTH = 16
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+#: The mark :func:`factory` sets; compared by identity, so no other object can fake it.
+_MARK = object()
+
+
+def factory(fn: _F) -> _F:
+    """Mark ``fn`` as a factory that a spec may name in ``system.factory``.
+
+    A spec can name only marked functions: ``factory = "subprocess:run"`` is refused
+    without being called. Mark a function only if any keyword arguments a spec gives it
+    are harmless (it builds a problem from numbers and switches).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(**params) -> EstimationProblem``.
+
+    Returns
+    -------
+    callable
+        ``fn`` itself (marked).
+
+    Examples
+    --------
+    >>> import etobs
+    >>> @etobs.factory
+    ... def my_problem(k=1.0):
+    ...     ...
+    >>> etobs._spec.is_factory(my_problem)
+    True
+
+    """
+    if not callable(fn):
+        raise InputError(f"@etobs.factory marks a function; got {fn!r} ({type(fn).__name__})")
+    fn.__etobs_factory__ = _MARK  # type: ignore[attr-defined]
+    return fn
+
+
+def is_factory(obj: Any) -> bool:
+    """Whether ``obj`` was marked with :func:`factory`."""
+    try:
+        return getattr(obj, "__etobs_factory__", None) is _MARK
+    except Exception:  # an object whose attribute lookup fails is not a factory
+        return False
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML file ``path``, read in bounded memory (at most :data:`MAX_SPEC_BYTES`).
+
+    Raises :class:`SpecError` naming the file when it is missing, a directory, unreadable,
+    too large, not UTF-8, not TOML or nested deeper than :data:`MAX_DEPTH`.
+    """
+    name = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_SPEC_BYTES + 1)
+    except FileNotFoundError:
+        raise SpecError(f"spec file {name!r} does not exist") from None
+    except IsADirectoryError:
+        raise SpecError(f"spec file {name!r} is a directory; expected a TOML file") from None
+    except OSError as exc:
+        raise SpecError(f"cannot read spec file {name!r}: {exc.strerror or exc}") from None
+    if len(data) > MAX_SPEC_BYTES:
+        raise SpecError(
+            f"spec file {name!r} is larger than {MAX_SPEC_BYTES} bytes (1 MiB); a spec is a few kB of TOML"
+        )
+    return parse_toml(data, name)
+
+
+def parse_toml(data: bytes, name: str) -> dict[str, Any]:
+    """The TOML document ``data`` (UTF-8) of the file ``name``, checked as :func:`read_toml` does."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SpecError(
+            f"spec file {name!r} is not UTF-8 text: byte {exc.start} is {data[exc.start]:#04x}"
+        ) from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"spec file {name!r} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SpecError(f"spec file {name!r} nests arrays or tables deeper than {MAX_DEPTH} levels") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise SpecError(f"spec file {name!r} holds a value Python cannot read: {exc}") from None
+    check_tree(raw, name)
+    return raw
+
+
+def check_tree(raw: Any, name: str | None = None) -> None:
+    """Refuse, naming the key, what no spec key takes: deep nesting, huge integers, dates.
+
+    That is nesting deeper than :data:`MAX_DEPTH`, integers beyond float range and TOML
+    dates and times. ``name`` is the spec file, if any. Called on every spec read from a
+    file and on every spec given as a dictionary, before its keys are parsed.
+    """
+    in_file = "" if name is None else f" in spec file {name!r}"
+    stack: list[tuple[Any, str, int]] = [(raw, "", 0)]
+    while stack:  # bounded: each value of the parsed document is visited once
+        value, where, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise SpecError(
+                f"`{where}`{in_file} is nested {depth} levels deep; a spec nests at most {MAX_DEPTH}"
+            )
+        if isinstance(value, dict):
+            stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
+        elif isinstance(value, list | tuple):
+            stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
+        elif isinstance(value, int) and not isinstance(value, bool):
+            number(where, value)
+        elif isinstance(value, datetime.date | datetime.time):
+            raise SpecError(
+                f"`{where}`{in_file} must be a number, string, boolean, array or table; got a date or time"
+            )
 
 
 def keys(where: str, table: Any, required: set[str], optional: set[str]) -> dict[str, Any]:
@@ -39,9 +174,21 @@ def number(
     ok = isinstance(value, int) if integer else isinstance(value, (int, float))
     if isinstance(value, bool) or not ok:
         kind = "an integer" if integer else "a number"
-        raise SpecError(f"`{key}` must be {kind}; got {value!r}")
-    if not np.isfinite(value):
+        raise SpecError(f"`{key}` must be {kind}; got {_short(value)}")
+    if isinstance(value, int) and abs(value) > _FLOAT_MAX:  # 10**400 has no float (nor isfinite)
+        digits = math.floor(value.bit_length() * math.log10(2)) + 1
+        raise SpecError(f"`{key}` must lie within +-1.8e308; got an integer of about {digits} digits")
+    if not math.isfinite(value):
         raise SpecError(f"`{key}` must be finite; got {value!r}")
     if lower is not None and (value < lower or (strict and value == lower)):
         raise SpecError(f"`{key}` must be {'>' if strict else '>='} {lower:g}; got {value!r}")
     return value
+
+
+_FLOAT_MAX = int(np.finfo(float).max)
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a spec value may be megabytes long)."""
+    text = repr(value) if not isinstance(value, int) or value.bit_length() < 1000 else "a huge integer"
+    return text if len(text) <= limit else text[: limit - 3] + "..."

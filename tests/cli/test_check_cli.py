@@ -97,8 +97,8 @@ def test_check_refuses_a_problem_the_theorems_do_not_cover(tmp_path, capsys):
     # the robot arm with the observer-copy hold (Remark 3): no certificate, exit 2
     factory = tmp_path / "copy_hold.py"
     factory.write_text(
-        "from dataclasses import replace\nfrom etobs.examples import robot_arm\n\n"
-        "def problem(**kw):\n    return replace(robot_arm(**kw), hold='innovation')\n"
+        "from dataclasses import replace\nimport etobs\nfrom etobs.examples import robot_arm\n\n"
+        "@etobs.factory\ndef problem(**kw):\n    return replace(robot_arm(**kw), hold='innovation')\n"
     )
     spec = tmp_path / "check.toml"
     spec.write_text(f'[system]\nfactory = "{factory}:problem"\n[guarantees]\nE = [10.0, 20.0]\n')

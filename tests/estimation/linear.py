@@ -12,6 +12,7 @@ import numpy as np
 from scipy.integrate import quad
 from scipy.linalg import expm
 
+import etobs
 from etobs import EstimationProblem, Node, Observer, Plant
 from etobs.model import Sinusoid
 
@@ -43,6 +44,7 @@ def l1_gain(G: np.ndarray) -> float:
     return quad(lambda s: np.linalg.norm(expm(A_CL * s) @ G, 2), 0.0, 40.0, limit=200)[0]
 
 
+@etobs.factory
 def factory(sigma: float = 2.0, eps: float = 0.01, noise: bool = False) -> EstimationProblem:
     """The oscillator with a dynamic rule, as a spec's ``system.factory``."""
     from etobs import DynamicRule, Linear, Quadratic

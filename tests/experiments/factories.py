@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+import etobs
 from etobs import DynamicRule, EstimationProblem, Linear, Node, Observer, Plant, Quadratic
 
 
@@ -21,6 +22,7 @@ def _observer(t, z, u, ybar, yhat, p):
     return -p[0] * z + np.sin(t) + 2.0 * (ybar - yhat)
 
 
+@etobs.factory
 def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False):
     """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
 
@@ -43,6 +45,7 @@ def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=Fal
     return EstimationProblem(plant, obs, [Node((0,), rule)])
 
 
+@etobs.factory
 def scalar_network(k=1.0, loss=0.0, delay=0.0, relative=False):
     """The scalar system behind a lossy, delayed network, optionally with the relative rule."""
     from etobs import Link, Network, RelativeRule
@@ -52,3 +55,14 @@ def scalar_network(k=1.0, loss=0.0, delay=0.0, relative=False):
     return EstimationProblem(
         pb.plant, pb.observer, [Node((0,), rule)], network=Network(Link(delay=delay, loss=loss), seed=5)
     )
+
+
+@etobs.factory
+def not_a_problem(**kwargs):
+    """A marked factory that returns something else (a dict)."""
+    return {}
+
+
+def unmarked(k=1.0):
+    """The scalar system, but not marked as a factory: a spec may not call it."""
+    return scalar(k=k)

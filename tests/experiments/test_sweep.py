@@ -92,7 +92,7 @@ def test_factory_errors_name_the_problem(tmp_path):
         resolve_factory("no_such_module:f")
     with pytest.raises(SpecError, match=r"has no callable 'nothing'"):
         resolve_factory(FACTORY.replace(":scalar", ":nothing"))
-    bad = parse_spec(raw_spec(system={"factory": "builtins:dict"}))
+    bad = parse_spec(raw_spec(system={"factory": FACTORY.replace(":scalar", ":not_a_problem")}))
     with pytest.raises(SpecError, match=r"returned dict, not an EstimationProblem"):
         bad.problem(0)
 

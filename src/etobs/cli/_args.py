@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError
+from etobs._spec import SpecError, parse_toml, read_toml
 
 
 def positive_int(text: str) -> int:
@@ -41,18 +40,16 @@ def backend(text: str) -> str:
 
 
 def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, Any]:
-    """The TOML spec ``name``: a packaged one (``package/data/packaged[name]``) or a file."""
+    """The TOML spec ``name``: a packaged one (``package/data/packaged[name]``) or a file.
+
+    A file is read in bounded memory and checked as :func:`etobs._spec.read_toml` does.
+    """
     if name in packaged:
-        text = resources.files(package).joinpath("data", packaged[name]).read_text()
-    else:
-        path = Path(name)
-        if not path.is_file():
-            raise SpecError(f"SPEC must be a TOML file or one of {', '.join(packaged)}; got {name!r}")
-        text = path.read_text(encoding="utf-8")
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"SPEC {name!r} is not valid TOML: {exc}") from exc
+        data = resources.files(package).joinpath("data", packaged[name]).read_bytes()
+        return parse_toml(data, name)
+    if not Path(name).exists():
+        raise SpecError(f"SPEC must be a TOML file or one of {', '.join(packaged)}; got {name!r}")
+    return read_toml(name)
 
 
 def execution_args(p: argparse.ArgumentParser) -> None:

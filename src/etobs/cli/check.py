@@ -40,7 +40,7 @@ from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.cli._args import load_toml
-from etobs.examples.registry import resolve_factory
+from etobs.examples.registry import make_problem, resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
 
@@ -63,14 +63,13 @@ def run(args: argparse.Namespace) -> int:
     params = system.get("params", {})
     if not isinstance(params, dict):
         raise SpecError(f"`system.params` must be a table; got {type(params).__name__}")
-    factory = resolve_factory(system["factory"])
-    problem = factory(**params)
+    problem = make_problem(system["factory"], params, "system.params")
     iss = None
     if "observer" in top:
         iss, L = _iss(top["observer"], problem)
         # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
-        if "L" not in params and "L" in inspect.signature(factory).parameters:
-            problem = factory(**params, L=L)
+        if "L" not in params and "L" in inspect.signature(resolve_factory(system["factory"])).parameters:
+            problem = make_problem(system["factory"], {**params, "L": L}, "system.params with observer.L")
     g = _keys(
         "guarantees",
         top.get("guarantees", {}),

@@ -5,15 +5,25 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from etobs import __version__
+from etobs._spec import SpecError
 from etobs.cli import check, compare, demo, runtime, sweep
 from etobs.errors import EtobsError
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (the usage is one ``--help`` away)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE`` on one line and exit with status 2."""
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``etobs`` command."""
-    parser = argparse.ArgumentParser(
+    """The argument parser of the ``etobs`` command (its sub-parsers are of the same class)."""
+    parser = _Parser(
         prog="etobs", description="Decentralized event-triggered state estimation of nonlinear systems."
     )
     parser.add_argument("--version", action="version", version=f"etobs {__version__}")
@@ -27,13 +37,36 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point: parse ``argv`` and run the chosen command."""
+    """Entry point: parse ``argv`` and run the chosen command.
+
+    Bad input never ends in a traceback: an :class:`~etobs.errors.EtobsError` (bad input
+    or an unsolvable design) or an :class:`OSError` (a file or folder that cannot be
+    read or written, an address in use) is one line on stderr and exit status 2; a spec
+    error names the spec file.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except EtobsError as exc:  # bad input or an unsolvable design: one clear line, no traceback
-        parser.exit(2, f"etobs: error: {exc}\n")
+    except EtobsError as exc:
+        parser.exit(2, f"etobs: error: {_one_line(_in_spec(args, exc))}\n")
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        parser.exit(2, f"etobs: error: {_one_line(where + (exc.strerror or str(exc)))}\n")
+
+
+def _in_spec(args: argparse.Namespace, exc: EtobsError) -> str:
+    """The message of ``exc``, prefixed by the spec file for a spec error that does not name it."""
+    spec = getattr(args, "spec", None)
+    text = str(exc)
+    if isinstance(exc, SpecError) and spec is not None and str(spec) not in text:
+        return f"{spec}: {text}"
+    return text
+
+
+def _one_line(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped (a spec key may hold them)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 if __name__ == "__main__":  # pragma: no cover

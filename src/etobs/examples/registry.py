@@ -1,42 +1,227 @@
-"""Resolve a factory named in a spec: a registered example, ``module:function`` or ``file.py:function``."""
+"""The factory a spec names in ``system.factory``: resolved, refused unless marked, called.
+
+``system.factory`` is a registered example (``"robot_arm"``), ``"package.module:function"``
+or ``"path/to/file.py:function"``. The function must be marked with
+:func:`etobs.factory`: a spec is data, but the function it names runs with the spec's
+arguments, so ``factory = "subprocess:run"`` with ``args = [...]`` would run a command.
+
+A module or file that is not imported yet is read first, not run: unless it defines the
+function with the mark (or imports the name), it is refused without being imported, so
+a spec cannot run a module's import-time code either. Once imported, the mark itself is
+checked (by identity, :func:`etobs._spec.is_factory`).
+"""
 
 from __future__ import annotations
 
+import ast
 import importlib
+import importlib.machinery
 import importlib.util
-from collections.abc import Callable
+import inspect
+import sys
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
-from etobs._spec import SpecError
+from etobs._spec import SpecError, is_factory
+from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
-from etobs.examples.robot_arm import robot_arm
+from etobs.examples.robot_arm import robot_arm, robot_arm_network
 
 #: Factories that a spec can name directly.
-REGISTRY: dict[str, Callable[..., EstimationProblem]] = {"robot_arm": robot_arm}
+REGISTRY: dict[str, Callable[..., EstimationProblem]] = {
+    "robot_arm": robot_arm,
+    "robot_arm_network": robot_arm_network,
+}
+
+#: The fix, in every refusal.
+_FIX = "mark it with @etobs.factory if a spec may call it (a spec names code: see docs/specs.md)"
 
 
 def resolve_factory(name: str) -> Callable[..., EstimationProblem]:
-    """A registered name, ``"package.module:function"`` or ``"path/to/file.py:function"``."""
+    """A registered name, ``"package.module:function"`` or ``"path/to/file.py:function"``.
+
+    Raises :class:`SpecError` when the function is not marked with
+    :func:`etobs.factory` (without importing its module when that can be seen from its
+    source), cannot be found or cannot be imported.
+    """
+    if not isinstance(name, str):
+        raise SpecError(f"`system.factory` must be a string; got {type(name).__name__}")
     if name in REGISTRY:
         return REGISTRY[name]
-    if ":" not in name:
+    where, _, attr = name.rpartition(":")
+    if not where or not attr.isidentifier():
         raise SpecError(
             f"`system.factory` = {name!r} is neither a registered example ({', '.join(REGISTRY)}) "
             "nor of the form 'package.module:function' or 'path/file.py:function'"
         )
-    where, _, attr = name.rpartition(":")
-    try:
-        if where.endswith(".py"):
-            loc = importlib.util.spec_from_file_location(Path(where).stem, where)
-            if loc is None or loc.loader is None or not Path(where).exists():
-                raise ImportError(f"no file {where!r}")
-            module = importlib.util.module_from_spec(loc)
-            loc.loader.exec_module(module)
-        else:
-            module = importlib.import_module(where)
-    except ImportError as exc:
-        raise SpecError(f"`system.factory`: cannot import {where!r}: {exc}") from exc
+    module = _load_file(name, where, attr) if where.endswith(".py") else _load_module(name, where, attr)
     fn = getattr(module, attr, None)
     if not callable(fn):
         raise SpecError(f"`system.factory`: {where!r} has no callable {attr!r}")
+    if not is_factory(fn):
+        raise SpecError(f"`system.factory` = {name!r} is not marked as a factory; {_FIX}")
     return fn
+
+
+def check_arguments(factory: str, calls: Iterable[tuple[str, dict[str, Any]]]) -> None:
+    """Fail early, naming the key, when a call ``(where, kwargs)`` does not fit the factory.
+
+    The factory itself is not called here (in a sweep, it runs in the workers).
+    """
+    fn = resolve_factory(factory)
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):  # builtins without a signature: checked when called
+        return
+    open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values())
+    for where, kwargs in calls:
+        for key in kwargs:
+            if not open_ended and key not in sig.parameters:
+                raise SpecError(
+                    f"parameter `{key}` ({where}) is not an argument of the factory "
+                    f"{factory!r}; it takes: {', '.join(sig.parameters) or 'no arguments'}"
+                )
+        try:
+            sig.bind(**kwargs)
+        except TypeError as exc:
+            raise SpecError(
+                f"the arguments {', '.join(kwargs) or '(none)'} ({where}) do not fit the factory "
+                f"{factory!r}: {exc}"
+            ) from None
+
+
+def make_problem(factory: str, kwargs: dict[str, Any], where: str) -> EstimationProblem:
+    """``factory(**kwargs)``, checked to be an :class:`EstimationProblem`.
+
+    ``where`` names the arguments' origin in errors (``"system.params"``, ``"row 0, ..."``).
+    Whatever the factory raises becomes a :class:`SpecError` that names ``where``.
+    """
+    check_arguments(factory, [(where, kwargs)])
+    fn = resolve_factory(factory)
+    try:
+        problem = fn(**kwargs)
+    except InputError as exc:  # the factory checked its arguments: say which spec table they came from
+        raise SpecError(f"{where}: {exc}") from exc
+    except Exception as exc:
+        raise SpecError(
+            f"the factory {factory!r} failed on the arguments of {where}: {type(exc).__name__}: {exc}"
+        ) from exc
+    if not isinstance(problem, EstimationProblem):
+        kind = type(problem).__name__
+        raise SpecError(f"the factory {factory!r} returned {kind}, not an EstimationProblem")
+    return problem
+
+
+def _load_file(name: str, where: str, attr: str) -> ModuleType:
+    """The module of ``path/file.py``, executed only if its source marks ``attr``."""
+    path = Path(where)
+    if not path.is_file():
+        raise SpecError(f"`system.factory`: cannot import {where!r}: no such file")
+    _require_mark(name, path, attr)
+    loc = importlib.util.spec_from_file_location(path.stem, path)
+    if loc is None or loc.loader is None:
+        raise SpecError(f"`system.factory`: cannot import {where!r}: not a Python file")
+    module = importlib.util.module_from_spec(loc)
+    try:
+        loc.loader.exec_module(module)
+    except Exception as exc:
+        raise SpecError(f"`system.factory`: importing {where!r} failed: {type(exc).__name__}: {exc}") from exc
+    return module
+
+
+def _load_module(name: str, where: str, attr: str) -> ModuleType:
+    """The module ``where``; one not imported yet is imported only if its source marks ``attr``."""
+    if where in sys.modules:
+        return sys.modules[where]
+    if not all(part.isidentifier() for part in where.split(".")):
+        raise SpecError(f"`system.factory`: cannot import {where!r}: not a module name")
+    origin = _source_of(where)
+    if origin is None:
+        raise SpecError(
+            f"`system.factory` = {name!r}: {where!r} has no Python source in which to look for "
+            f"the mark, so it is not imported; {_FIX}"
+        )
+    _require_mark(name, origin, attr)
+    try:
+        return importlib.import_module(where)
+    except Exception as exc:
+        raise SpecError(f"`system.factory`: importing {where!r} failed: {type(exc).__name__}: {exc}") from exc
+
+
+def _source_of(module: str) -> Path | None:
+    """The source file of ``module`` found without importing it or its packages (``None``: none).
+
+    Raises :class:`SpecError` when there is no such module.
+    """
+    parts = module.split(".")
+    spec = None
+    for i in range(len(parts)):
+        full = ".".join(parts[: i + 1])
+        if full in sys.modules:
+            spec = getattr(sys.modules[full], "__spec__", None)
+        elif i == 0:
+            spec = importlib.machinery.PathFinder.find_spec(full)
+        else:
+            places = None if spec is None else spec.submodule_search_locations
+            spec = None if places is None else importlib.machinery.PathFinder.find_spec(full, list(places))
+        if spec is None:
+            raise SpecError(f"`system.factory`: cannot import {module!r}: no module named {full!r}")
+    origin = spec.origin if spec is not None else None
+    if not origin or not origin.endswith(".py") or not Path(origin).is_file():
+        return None
+    return Path(origin)
+
+
+def _require_mark(name: str, path: Path, attr: str) -> None:
+    """Refuse, before running ``path``, a source that does not define ``attr`` with the mark."""
+    try:
+        tree = ast.parse(importlib.util.decode_source(path.read_bytes()), filename=str(path))
+    except (OSError, SyntaxError, ValueError) as exc:
+        raise SpecError(f"`system.factory`: cannot read {str(path)!r}: {exc}") from None
+    marks = [_marks(node, attr) for node in _top_level(tree.body)]
+    if True in marks:
+        return
+    if False not in marks:
+        raise SpecError(f"`system.factory`: {str(path)!r} has no callable {attr!r}")
+    raise SpecError(
+        f"`system.factory` = {name!r}: {attr!r} in {str(path)!r} is not marked as a factory, "
+        f"so its module is not imported; {_FIX}"
+    )
+
+
+def _top_level(body: list[ast.stmt]) -> Iterator[ast.stmt]:
+    """The module's statements, including those inside top-level ``if`` and ``try`` blocks."""
+    for node in body:
+        yield node
+        if isinstance(node, ast.If):
+            yield from _top_level(node.body + node.orelse)
+        elif isinstance(node, ast.Try):
+            blocks = node.body + node.orelse + node.finalbody
+            yield from _top_level(blocks + [s for h in node.handlers for s in h.body])
+
+
+def _marks(node: ast.stmt, attr: str) -> bool | None:
+    """Whether ``node`` defines ``attr`` with the mark; ``None`` when it does not define it.
+
+    An import of ``attr`` counts as marked: the mark is checked once the module is imported.
+    """
+    if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef) and node.name == attr:
+        return any(_is_mark(d) for d in node.decorator_list)
+    if isinstance(node, ast.Assign | ast.AnnAssign):  # attr = etobs.factory(fn)
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        if any(isinstance(t, ast.Name) and t.id == attr for t in targets):
+            return isinstance(node.value, ast.Call) and _is_mark(node.value.func)
+    if isinstance(node, ast.Import | ast.ImportFrom) and any(
+        (a.asname or a.name) == attr for a in node.names
+    ):
+        return True
+    return None
+
+
+def _is_mark(expr: ast.expr) -> bool:
+    """``factory`` or ``<anything>.factory`` (the mark itself is checked once imported)."""
+    return (isinstance(expr, ast.Name) and expr.id == "factory") or (
+        isinstance(expr, ast.Attribute) and expr.attr == "factory"
+    )

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs._spec import factory
 from etobs.estimation.problem import EstimationProblem
 from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sinusoid
 
@@ -61,6 +62,7 @@ def _pair(name: str, value: Any) -> tuple[float, float]:
     return float(arr[0]), float(arr[1])
 
 
+@factory
 def robot_arm(
     *,
     sigma: Sequence[float] | float = (600.0, 800.0),
@@ -171,6 +173,7 @@ def random_initial_states(n: int, seed: int | np.random.Generator | None = 0) ->
     return rng.uniform(0.0, 1.0, size=(n, 4)) * hi
 
 
+@factory
 def robot_arm_network(n_arms: int, **rule: Any) -> EstimationProblem:
     """``n_arms`` independent robot arms observed together: ``N = 2 n_arms`` sensor nodes.
 

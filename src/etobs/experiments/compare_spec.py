@@ -57,7 +57,7 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
-from etobs._spec import SpecError
+from etobs._spec import SpecError, check_tree
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.errors import InputError
@@ -250,6 +250,7 @@ def _why_not(rule: RuleEntry, network: NetworkEntry) -> str:
 
 def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
     """Validate a comparison spec given as a dictionary (the parsed TOML)."""
+    check_tree(raw)
     required, optional = COMMON_KEYS
     top = _keys("spec", raw, required | {"rules"}, optional | {"networks"})
     common = parse_common(top, default_name="compare", kwargs_key="params")

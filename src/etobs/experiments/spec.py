@@ -37,12 +37,11 @@ tables a sweep shares with a comparison (``system.factory``, ``initial_states``,
 from __future__ import annotations
 
 import itertools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError
+from etobs._spec import SpecError, check_tree, read_toml
 from etobs._spec import keys as _keys
 from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.common import COMMON_KEYS, Experiment, _name, normalize, parse_common
@@ -125,19 +124,13 @@ class SweepSpec(Experiment):
 
 
 def load_spec(path: str | Path) -> SweepSpec:
-    """Read and validate a TOML sweep spec."""
-    p = Path(path)
-    try:
-        raw = tomllib.loads(p.read_text())
-    except FileNotFoundError as exc:
-        raise SpecError(f"spec file {str(p)!r} does not exist") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"spec file {str(p)!r} is not valid TOML: {exc}") from exc
-    return parse_spec(raw)
+    """Read (at most 1 MiB, :func:`etobs._spec.read_toml`) and validate a TOML sweep spec."""
+    return parse_spec(read_toml(path))
 
 
 def parse_spec(raw: dict[str, Any]) -> SweepSpec:
     """Validate a spec given as a dictionary (the parsed TOML)."""
+    check_tree(raw)
     required, optional = COMMON_KEYS
     top = _keys("spec", raw, required, optional | {"rows", "grid", "scenarios"})
     common = parse_common(top, default_name="sweep", kwargs_key="fixed")
