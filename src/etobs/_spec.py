@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from etobs._validate import shown
 from etobs.errors import InputError
 
 
@@ -174,7 +175,7 @@ def number(
     ok = isinstance(value, int) if integer else isinstance(value, (int, float))
     if isinstance(value, bool) or not ok:
         kind = "an integer" if integer else "a number"
-        raise SpecError(f"`{key}` must be {kind}; got {_short(value)}")
+        raise SpecError(f"`{key}` must be {kind}; got {shown(value)}")
     if isinstance(value, int) and abs(value) > _FLOAT_MAX:  # 10**400 has no float (nor isfinite)
         digits = math.floor(value.bit_length() * math.log10(2)) + 1
         raise SpecError(f"`{key}` must lie within +-1.8e308; got an integer of about {digits} digits")
@@ -186,9 +187,3 @@ def number(
 
 
 _FLOAT_MAX = int(np.finfo(float).max)
-
-
-def _short(value: Any, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters (a spec value may be megabytes long)."""
-    text = repr(value) if not isinstance(value, int) or value.bit_length() < 1000 else "a huge integer"
-    return text if len(text) <= limit else text[: limit - 3] + "..."

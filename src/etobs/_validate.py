@@ -7,12 +7,27 @@ argument, the expectation and the received value.
 from __future__ import annotations
 
 import math
+import reprlib
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from etobs.errors import InputError, InputTypeError
+
+#: How values are shown in messages: a spec value may be a 1 MiB list or a 400-digit integer.
+_REPR = reprlib.Repr()
+_REPR.maxlist = _REPR.maxtuple = 8
+_REPR.maxstring = _REPR.maxother = 60
+_REPR.maxlong = 24
+_REPR.maxlevel = 3
+
+
+def shown(value: Any) -> str:
+    """``repr(value)``, shortened for an error message (long lists and numbers are elided)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist() if value.size <= 64 else f"array of shape {value.shape}"
+    return _REPR.repr(value)
 
 
 def real(
@@ -27,8 +42,11 @@ def real(
 ) -> float:
     """Return ``value`` as a float after checking it lies in the stated interval."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InputTypeError(f"`{name}` must be a real number; got {value!r} ({type(value).__name__})")
-    v = float(value)
+        raise InputTypeError(f"`{name}` must be a real number; got {shown(value)} ({type(value).__name__})")
+    try:
+        v = float(value)
+    except OverflowError:  # an int beyond float range
+        raise InputError(f"`{name}` must be a finite real number; got {shown(value)}") from None
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
         raise InputError(f"`{name}` must be a finite real number; got {v}")
     if lower is not None and (v < lower or (lower_open and v == lower)):
@@ -43,7 +61,7 @@ def real(
 def integer(name: str, value: Any, *, lower: int | None = None, upper: int | None = None) -> int:
     """Return ``value`` as an int after checking its type and bounds."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InputTypeError(f"`{name}` must be an integer; got {value!r} ({type(value).__name__})")
+        raise InputTypeError(f"`{name}` must be an integer; got {shown(value)} ({type(value).__name__})")
     v = int(value)
     if lower is not None and v < lower:
         raise InputError(f"`{name}` must be an integer >= {lower}; got {v}")
@@ -55,7 +73,7 @@ def integer(name: str, value: Any, *, lower: int | None = None, upper: int | Non
 def flag(name: str, value: Any) -> bool:
     """Return ``value`` after checking it is ``True`` or ``False`` (not ``"false"``, not 0)."""
     if not isinstance(value, bool | np.bool_):
-        raise InputTypeError(f"`{name}` must be true or false; got {value!r} ({type(value).__name__})")
+        raise InputTypeError(f"`{name}` must be true or false; got {shown(value)} ({type(value).__name__})")
     return bool(value)
 
 
@@ -63,8 +81,8 @@ def vector(name: str, value: Any, size: int | None = None) -> np.ndarray:
     """Return a finite float vector of the given size (read-only copy)."""
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputTypeError(f"`{name}` must be a vector of real numbers; got {value!r}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InputTypeError(f"`{name}` must be a vector of real numbers; got {shown(value)}") from exc
     if arr.ndim == 0:
         arr = arr.reshape(1)
     if arr.ndim != 1:
@@ -90,8 +108,8 @@ def matrix(name: str, value: Any, shape: tuple[int | None, int | None]) -> np.nd
     """Return a finite float matrix, checking each known dimension of ``shape``."""
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputTypeError(f"`{name}` must be a matrix of real numbers; got {value!r}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InputTypeError(f"`{name}` must be a matrix of real numbers; got {shown(value)}") from exc
     expected = tuple("*" if s is None else s for s in shape)
     if arr.ndim != 2 or any(s is not None and s != a for s, a in zip(shape, arr.shape, strict=False)):
         raise InputError(f"`{name}` has shape {arr.shape}; expected {expected}")
@@ -105,8 +123,8 @@ def batch(name: str, value: Any, n: int) -> np.ndarray:
     """Return a finite ``(B, n)`` float array from a vector ``(n,)`` or a batch ``(B, n)``."""
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputTypeError(f"`{name}` must be an array of real numbers; got {value!r}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InputTypeError(f"`{name}` must be an array of real numbers; got {shown(value)}") from exc
     if arr.ndim == 1:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != n or arr.shape[0] == 0:
@@ -122,7 +140,7 @@ def batch(name: str, value: Any, n: int) -> np.ndarray:
 def function(name: str, value: Any) -> Callable[..., Any]:
     """Check that ``value`` is callable."""
     if not callable(value):
-        raise InputTypeError(f"`{name}` must be callable; got {value!r} ({type(value).__name__})")
+        raise InputTypeError(f"`{name}` must be callable; got {shown(value)} ({type(value).__name__})")
     return value
 
 
@@ -133,7 +151,7 @@ def index_tuple(name: str, value: Any, what: str = "output") -> tuple[int, ...]:
     try:
         items = tuple(value)
     except TypeError as exc:
-        raise InputTypeError(f"`{name}` must be an int or a sequence of ints; got {value!r}") from exc
+        raise InputTypeError(f"`{name}` must be an int or a sequence of ints; got {shown(value)}") from exc
     if not items:
         raise InputError(f"`{name}` must name at least one {what} index; got an empty sequence")
     out = tuple(integer(f"{name}[{k}]", v, lower=0) for k, v in enumerate(items))

@@ -77,7 +77,9 @@ def test_demo_names_the_retired_numpy_backend(capsys):
         (["--x0", "3,2"], r"--x0 must be 4 comma-separated finite numbers \(e.g. 3,2,3,-2\); got '3,2'"),
         (["--x0", "3,2,nan,1"], r"--x0 must be 4 comma-separated finite numbers"),
         (["--window", "20"], r"--window must be 2 comma-separated finite numbers"),
-        (["--t-end", "-1"], r"--t-end must be a positive number of seconds; got -1.0"),
+        (["--t-end", "-1"], r"argument --t-end: must be a finite number > 0; got '-1'"),
+        (["--t-end", "nan"], r"argument --t-end: must be a finite number > 0; got 'nan'"),
+        (["--rtol", "1e400"], r"argument --rtol: must be a finite number > 0; got '1e400'"),
         (
             ["--backend", "rk4"],
             r"argument --backend: `--backend` must be one of \('auto', 'engine', 'scipy'\)",
@@ -88,7 +90,7 @@ def test_demo_bad_arguments(argv, match, capsys, tmp_path):
     with pytest.raises(SystemExit) as info:
         main(["demo", "robot-arm", "--out", str(tmp_path), *argv])
     err = capsys.readouterr().err + str(info.value.code)
-    assert info.value.code != 0
+    assert info.value.code == 2
     import re
 
     assert re.search(match, err), err

@@ -36,9 +36,11 @@ from typing import Any
 
 import numpy as np
 
+from etobs import _validate as v
 from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
+from etobs._validate import shown
 from etobs.cli._args import load_toml
 from etobs.examples.registry import make_problem, resolve_factory
 
@@ -76,15 +78,20 @@ def run(args: argparse.Namespace) -> int:
         set(),
         {"E", "E_estimate", "noise", "disturbance", "a_U", "d"},
     )
-    E = _estimate(problem, g["E_estimate"]) if "E_estimate" in g else g.get("E")
+    if "E_estimate" in g:
+        E: Any = _estimate(problem, g["E_estimate"])
+    elif isinstance(g.get("E"), list):
+        E = _numbers("guarantees.E", g["E"])
+    else:
+        E = None if "E" not in g else _number("guarantees.E", g["E"])
     cert = certify(
         problem,
         iss,
-        d=g.get("d"),
-        a_U=g.get("a_U"),
+        d=_numbers("guarantees.d", g["d"]) if "d" in g else None,
+        a_U=_number("guarantees.a_U", g["a_U"]) if "a_U" in g else None,
         E=E,
-        noise=g.get("noise"),
-        disturbance=g.get("disturbance", 0.0),
+        noise=_numbers("guarantees.noise", g["noise"]) if "noise" in g else None,
+        disturbance=_number("guarantees.disturbance", g.get("disturbance", 0.0)),
     )
     print(cert.to_json() if args.json else cert.format())
     if not cert.ok and not args.json:
@@ -105,20 +112,28 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
     keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q"}
     obs = _keys("observer", table, {"L", "c_v", "c"}, keys - {"L", "c_v", "c"})
     if "structure" in obs:
-        structure = _STRUCTURES.get(obs["structure"])
+        structure = _STRUCTURES.get(obs["structure"]) if isinstance(obs["structure"], str) else None
         if structure is None:
             raise SpecError(
-                f"`observer.structure` must be one of {', '.join(_STRUCTURES)}; got {obs['structure']!r}"
+                f"`observer.structure` must be one of {', '.join(_STRUCTURES)}; got {shown(obs['structure'])}"
             )
         A, C, verts, paper_L = structure()
     else:
         missing = [k for k in ("A", "C") if k not in obs]
         if missing:
             raise SpecError(f"missing key `observer.{missing[0]}` (or give `observer.structure`)")
-        A, C = np.asarray(obs["A"], float), np.asarray(obs["C"], float)
-        verts = slope_vertices(obs["G"], obs["H"], obs["slopes"]) if "G" in obs else ()
+        A, C = _matrix("observer.A", obs["A"]), _matrix("observer.C", obs["C"])
+        verts = ()
+        if "G" in obs or "H" in obs or "slopes" in obs:
+            missing = [k for k in ("G", "H", "slopes") if k not in obs]
+            if missing:
+                raise SpecError(f"missing key `observer.{missing[0]}` (G, H and slopes go together)")
+            G, H = _matrix("observer.G", obs["G"]), _matrix("observer.H", obs["H"])
+            verts = slope_vertices(G, H, v.matrix("observer.slopes", obs["slopes"], (None, 2)))
         paper_L = None
-    Q = obs.get("Q")
+    Q = _matrix("observer.Q", obs["Q"]) if "Q" in obs else None
+    if not isinstance(obs["L"], list) and obs["L"] not in ("design", "paper"):
+        raise SpecError(f"`observer.L` must be 'design', 'paper' or a matrix; got {shown(obs['L'])}")
     if obs["L"] == "design":
         gain = observer_gain(A, C, verts, Q=Q)
     elif obs["L"] == "paper":
@@ -126,9 +141,22 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
             raise SpecError("`observer.L` = 'paper' needs `observer.structure` (a registered example)")
         gain = check_gain(A, C, paper_L, verts, Q=Q)
     else:
-        gain = check_gain(A, C, obs["L"], verts, Q=Q)
+        gain = check_gain(A, C, _matrix("observer.L", obs["L"]), verts, Q=Q)
     nodes = [list(nd.outputs) for nd in problem.nodes]
-    return quadratic_iss_gains(gain, nodes, c_v=obs["c_v"], c=obs["c"]), gain.L
+    c_v, c = _number("observer.c_v", obs["c_v"]), _numbers("observer.c", obs["c"])
+    return quadratic_iss_gains(gain, nodes, c_v=c_v, c=c), gain.L
+
+
+def _numbers(key: str, value: Any) -> list[float]:
+    """A list of numbers (one per node), each checked by :func:`etobs._spec.number`."""
+    if not isinstance(value, list):
+        raise SpecError(f"`{key}` must be a list of numbers (one per node); got {shown(value)}")
+    return [float(_number(f"{key}[{i}]", x)) for i, x in enumerate(value)]
+
+
+def _matrix(key: str, value: Any) -> np.ndarray:
+    """A finite matrix given as a list of rows (its shape is checked where it is used)."""
+    return v.matrix(key, value, (None, None))
 
 
 def _robot_arm_structure() -> tuple[Any, ...]:
@@ -147,11 +175,11 @@ def _estimate(problem: Any, table: Any) -> list[float]:
     from etobs.design.rates import estimate_output_rate
 
     t = _keys("guarantees.E_estimate", table, {"low", "high"}, {"runs", "t_end", "seed", "margin"})
-    low, high = np.asarray(t["low"], float), np.asarray(t["high"], float)
+    low, high = (v.vector(f"guarantees.E_estimate.{k}", t[k]) for k in ("low", "high"))
     if low.shape != (problem.plant.n_x,) or high.shape != low.shape or np.any(high < low):
         raise SpecError(
             f"`guarantees.E_estimate.low/high` must be {problem.plant.n_x} numbers each with low <= high; "
-            f"got {t['low']!r} and {t['high']!r}"
+            f"got {shown(t['low'])} and {shown(t['high'])}"
         )
     where = "guarantees.E_estimate"
     runs = int(_number(f"{where}.runs", t.get("runs", 20), lower=1, integer=True))

@@ -15,10 +15,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from etobs.cli._args import execution, execution_args, load_toml
+from etobs.cli._args import execution, execution_args, folder, load_toml
 from etobs.experiments.compare import Comparison, EntryResult, compare
 from etobs.experiments.compare_spec import CompareSpec, parse_compare_spec
 from etobs.experiments.store import atomic_write
+from etobs.experiments.tables import not_completed
 
 PACKAGED = {"robot_arm": "robot_arm_compare.toml"}
 
@@ -33,7 +34,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("spec", metavar="SPEC", help=f"TOML file, or a packaged spec: {', '.join(PACKAGED)}")
     p.add_argument(
-        "--out", type=Path, default=Path("compare-out"), help="output folder (default compare-out)"
+        "--out", type=folder, default=Path("compare-out"), help="output folder (default compare-out)"
     )
     p.add_argument("--no-plot", action="store_true", help="skip tradeoff.png")
     execution_args(p)
@@ -52,9 +53,10 @@ def run(args: argparse.Namespace) -> int:
 
     def report(e: EntryResult) -> None:  # [row of the table / rows]
         ok = sum(s == "completed" for s in e.status)
+        others = f" ({not_completed(e.status)})" if ok < len(e.status) else ""
         print(
             f"[{row[(e.rule, e.network)]}/{spec.n_groups}] {e.rule} / {e.network}: "
-            f"{ok}/{spec.initial_states.runs} runs completed "
+            f"{ok}/{spec.initial_states.runs} runs completed{others} "
             f"in {e.seconds:.1f} s ({e.backend})",
             file=sys.stderr,
             flush=True,

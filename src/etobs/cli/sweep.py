@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from etobs.cli._args import execution, execution_args
+from etobs.cli._args import execution, execution_args, folder
 from etobs.experiments import SweepResult, load_spec, run_sweep
 from etobs.experiments.store import atomic_write, last_line
 from etobs.experiments.tables import to_csv
@@ -21,14 +21,14 @@ def add_parsers(sub: Any) -> None:
         description="Run a sweep; rerunning with the same --out resumes it.",
     )
     p.add_argument("spec", type=Path, help="sweep spec (TOML), e.g. examples/table1.toml")
-    p.add_argument("--out", type=Path, default=None, help="output folder (default: sweep-NAME)")
+    p.add_argument("--out", type=folder, default=None, help="output folder (default: sweep-NAME)")
     execution_args(p)
     p.set_defaults(func=run_sweep_command)
 
     r = sub.add_parser("reproduce", help="reproduce a result of the paper")
     what = r.add_subparsers(dest="what", required=True, metavar="WHAT")
     t = what.add_parser("table1", help="the paper's Table 1 (13 rows x 2 scenarios x 100 runs)")
-    t.add_argument("--out", type=Path, default=Path("table1-out"), help="output folder")
+    t.add_argument("--out", type=folder, default=Path("table1-out"), help="output folder")
     execution_args(t)
     t.set_defaults(func=run_table1_command)
 

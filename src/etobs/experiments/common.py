@@ -31,7 +31,7 @@ The pipeline (:mod:`etobs.experiments.pipeline`) runs the groups of any
 from __future__ import annotations
 
 import abc
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Self
 
 import numpy as np
@@ -39,22 +39,14 @@ import numpy as np
 from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
+from etobs._validate import shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.options import SolverOptions
 from etobs.hybrid.solver import check_backend
 
-_SOLVER_KEYS = {
-    "method",
-    "rtol",
-    "atol",
-    "max_step",
-    "first_step",
-    "max_jumps",
-    "max_steps",
-    "event_samples",
-    "event_xtol",
-}
+#: Keys of ``[solver]``: every field of :class:`SolverOptions` (written once, there).
+_SOLVER_KEYS = {f.name for f in fields(SolverOptions) if f.init}
 #: Runs per chunk when ``execution.chunk_size`` is not given.
 DEFAULT_CHUNK = 20
 #: Format of the stored records; part of every result key, so records written in an
@@ -218,7 +210,7 @@ def parse_common(top: dict[str, Any], *, default_name: str, kwargs_key: str) -> 
     """
     system = _keys("system", top["system"], {"factory"}, {kwargs_key})
     if not isinstance(system["factory"], str):
-        raise SpecError(f"`system.factory` must be a string; got {system['factory']!r}")
+        raise SpecError(f"`system.factory` must be a string; got {shown(system['factory'])}")
     kwargs = system.get(kwargs_key, {})
     if not isinstance(kwargs, dict):
         raise SpecError(
@@ -265,23 +257,25 @@ def normalize(obj: Any, *, ints_as_floats: bool = True) -> Any:
 
 def _name(key: str, value: Any) -> str:
     if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
-        raise SpecError(f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {value!r}")
+        raise SpecError(
+            f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {shown(value)}"
+        )
     return value
 
 
 def _pair(key: str, value: Any) -> tuple[float, float]:
     if not isinstance(value, list) or len(value) != 2:
-        raise SpecError(f"`{key}` must be a pair [start, stop]; got {value!r}")
+        raise SpecError(f"`{key}` must be a pair [start, stop]; got {shown(value)}")
     lo, hi = (_number(f"{key}[{i}]", v) for i, v in enumerate(value))
     if hi < lo:
-        raise SpecError(f"`{key}` must satisfy start <= stop; got {value!r}")
+        raise SpecError(f"`{key}` must satisfy start <= stop; got {shown(value)}")
     return float(lo), float(hi)
 
 
 def _window(key: str, value: Any, t_end: float) -> tuple[float, float]:
     lo, hi = _pair(key, value)
     if lo < 0 or hi > t_end:
-        raise SpecError(f"`{key}` must lie within [0, horizon.t_end = {t_end:g}]; got {value!r}")
+        raise SpecError(f"`{key}` must lie within [0, horizon.t_end = {t_end:g}]; got {shown(value)}")
     return lo, hi
 
 
@@ -298,7 +292,7 @@ def parse_initial_states(table: Any) -> InitialStates:
     ini = _keys("initial_states", table, {"low", "high", "runs", "seed"}, set())
     for k in ("low", "high"):
         if not isinstance(ini[k], list) or not ini[k]:
-            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {ini[k]!r}")
+            raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {shown(ini[k])}")
     low = tuple(float(_number(f"initial_states.low[{i}]", v)) for i, v in enumerate(ini["low"]))
     high = tuple(float(_number(f"initial_states.high[{i}]", v)) for i, v in enumerate(ini["high"]))
     if len(low) != len(high):

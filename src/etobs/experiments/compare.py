@@ -25,6 +25,7 @@ from etobs.errors import InputError
 from etobs.experiments.compare_spec import CompareSpec
 from etobs.experiments.pipeline import experiment_folder, run_groups, stored
 from etobs.experiments.store import last_line
+from etobs.experiments.tables import not_completed, status_notes
 
 
 @dataclass(frozen=True)
@@ -194,6 +195,12 @@ class Comparison:
         for f in self.failures:
             last = last_line(f)
             lines += ["", f"Failed: {f['where']}, runs {f['runs'][0]}..{f['runs'][-1]}: {last}"]
+        statuses = [st for e in self.entries for st in e.status]
+        for e in self.entries:
+            if not_completed(e.status):
+                lines += ["", f"Not completed: {e.rule} / {e.network}: {not_completed(e.status)}."]
+        notes = status_notes(statuses)
+        lines += [""] + [f"- {note}" for note in notes] if notes else []
         return "\n".join(lines) + "\n"
 
     def to_json(self) -> dict[str, Any]:

@@ -60,6 +60,7 @@ from typing import Any
 from etobs._spec import SpecError, check_tree
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
+from etobs._validate import shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.common import COMMON_KEYS, Experiment, normalize, parse_common
@@ -262,7 +263,7 @@ def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
 
 def _list(key: str, items: Any, parse: Any) -> tuple[Any, ...]:
     if not isinstance(items, list) or not items:
-        raise SpecError(f"`{key}` must be a non-empty array of tables ([[{key}]]); got {items!r}")
+        raise SpecError(f"`{key}` must be a non-empty array of tables ([[{key}]]); got {shown(items)}")
     out = tuple(parse(f"{key}[{i}]", item) for i, item in enumerate(items))
     names = [e.name for e in out]
     twice = sorted({n for n in names if names.count(n) > 1})
@@ -274,7 +275,7 @@ def _list(key: str, items: Any, parse: Any) -> tuple[Any, ...]:
 def _entry_name(where: str, table: dict[str, Any]) -> str:
     name = table.get("name")
     if not isinstance(name, str) or not name:
-        raise SpecError(f"`{where}.name` must be a non-empty string; got {name!r}")
+        raise SpecError(f"`{where}.name` must be a non-empty string; got {shown(name)}")
     return name
 
 
@@ -282,15 +283,15 @@ def _rule(where: str, table: Any) -> RuleEntry:
     if not isinstance(table, dict):
         raise SpecError(f"`{where}` must be a table; got {type(table).__name__}")
     kind = table.get("kind")
-    if kind not in RULE_KINDS:
-        raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {kind!r}")
+    if not isinstance(kind, str) or kind not in RULE_KINDS:
+        raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {shown(kind)}")
     required = {"name", "kind"} | ({"period"} if kind == "periodic" else set())
     required |= {"rho", "eps"} if kind == "relative" else set()
     required |= {"delta"} if kind == "send_on_delta" else set()
     t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy"})
     copy = t.get("observer_copy", False)
     if not isinstance(copy, bool):
-        raise SpecError(f"`{where}.observer_copy` must be true or false; got {copy!r}")
+        raise SpecError(f"`{where}.observer_copy` must be true or false; got {shown(copy)}")
     params = {k: v for k, v in t.items() if k not in ("name", "kind", "observer_copy")}
     for k, val in params.items():
         for i, x in enumerate(val if isinstance(val, list) else [val]):
@@ -339,5 +340,5 @@ def _loss(where: str, value: Any) -> float | Loss | None:
 
 def _numbers(where: str, value: Any, n: int) -> list[float]:
     if not isinstance(value, list) or len(value) != n:
-        raise SpecError(f"`{where}` must be a list of {n} numbers; got {value!r}")
+        raise SpecError(f"`{where}` must be a list of {n} numbers; got {shown(value)}")
     return [float(_number(f"{where}[{i}]", x)) for i, x in enumerate(value)]

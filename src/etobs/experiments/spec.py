@@ -43,6 +43,7 @@ from typing import Any
 
 from etobs._spec import SpecError, check_tree, read_toml
 from etobs._spec import keys as _keys
+from etobs._validate import shown
 from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.common import COMMON_KEYS, Experiment, _name, normalize, parse_common
 from etobs.experiments.systems import build, check_arguments
@@ -150,7 +151,7 @@ def _rows(top: dict[str, Any]) -> tuple[dict[str, Any], ...]:
             raise SpecError("`grid` must be a table mapping each parameter to a list of values")
         for k, vals in grid.items():
             if not isinstance(vals, list) or not vals:
-                raise SpecError(f"`grid.{k}` must be a non-empty list of values; got {vals!r}")
+                raise SpecError(f"`grid.{k}` must be a non-empty list of values; got {shown(vals)}")
         keys = list(grid)
         return tuple(dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values()))
     rows = top.get("rows", [{}])

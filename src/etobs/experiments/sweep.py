@@ -15,7 +15,15 @@ from etobs.errors import InputError
 from etobs.experiments.pipeline import experiment_folder, run_groups, stored
 from etobs.experiments.spec import SweepSpec
 from etobs.experiments.store import ResultStore, atomic_write, last_line
-from etobs.experiments.tables import aggregate, flatten_params, run_rows, to_csv, to_markdown
+from etobs.experiments.tables import (
+    aggregate,
+    flatten_params,
+    not_completed,
+    run_rows,
+    status_notes,
+    to_csv,
+    to_markdown,
+)
 
 
 @dataclass(frozen=True)
@@ -170,6 +178,10 @@ def _write_outputs(result: SweepResult, started: str) -> None:
     for f in result.failures:
         last = last_line(f)
         text.append(f"- failed: {f.get('where', '')} runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
+    statuses = [r["status"] for r in result.runs]
+    if not_completed(statuses):  # each run's status is in runs.csv; say here why runs stopped early
+        text += ["", f"Runs not completed: {not_completed(statuses)} (see `status` in runs.csv)."]
+        text += [f"- {note}" for note in status_notes(statuses)]
     atomic_write(out / "report.md", "\n".join(text) + "\n")
 
 

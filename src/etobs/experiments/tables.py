@@ -113,3 +113,28 @@ def to_markdown(rows: list[dict[str, Any]], columns: Sequence[str], digits: int 
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(fmt(r.get(c)) for c in columns) + " |" for r in rows]
     return "\n".join(lines) + "\n"
+
+
+def not_completed(statuses: Iterable[str]) -> str:
+    """How many runs ended with each status other than ``completed``: ``"2 max_jumps, 1 zeno"``.
+
+    ``""`` when every run completed.
+    """
+    counts: dict[str, int] = {}
+    for s in statuses:
+        if s != "completed":
+            counts[s] = counts.get(s, 0) + 1
+    return ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+
+
+def status_notes(statuses: Iterable[str]) -> list[str]:
+    """One line per status other than ``completed`` that occurs: what it means and how to fix it."""
+    from etobs.hybrid.status import Status, status_message
+
+    out = []
+    for label in sorted(set(statuses) - {"completed"}):
+        try:
+            out.append(f"`{label}`: {status_message(Status[label.upper()])}")
+        except KeyError:  # a record written by another version
+            out.append(f"`{label}`: a status this version of etobs does not know")
+    return out
