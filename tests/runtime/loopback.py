@@ -38,6 +38,7 @@ class LossyLink:
         self.stats = {"in": 0, "dropped": 0, "duplicated": 0, "delayed": 0, "out": 0}
         self._lock = threading.Lock()
         self._pending = 0  # delayed datagrams not yet sent
+        self._timers = []
         self._stop = threading.Event()
         self._out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.thread = threading.Thread(target=self._relay, daemon=True)
@@ -49,20 +50,24 @@ class LossyLink:
                 data, _ = self.sock.recvfrom(4096)
             except TimeoutError:
                 continue
-            self.stats["in"] += 1
-            disturb = self.until is None or self.stats["in"] <= self.until
-            if disturb and self.rng.random() < self.loss:
-                self.stats["dropped"] += 1
-                continue
-            copies = 2 if disturb and self.rng.random() < self.duplicate else 1
-            self.stats["duplicated"] += copies - 1
-            delay = self.rng.uniform(0, self.max_delay) if disturb and self.max_delay else 0.0
-            if delay:
-                self.stats["delayed"] += 1
-                with self._lock:
+            # one datagram's whole fate is booked under the lock, so drained() never sees
+            # it counted in but not yet on its way
+            with self._lock:
+                self.stats["in"] += 1
+                disturb = self.until is None or self.stats["in"] <= self.until
+                if disturb and self.rng.random() < self.loss:
+                    self.stats["dropped"] += 1
+                    continue
+                copies = 2 if disturb and self.rng.random() < self.duplicate else 1
+                self.stats["duplicated"] += copies - 1
+                delay = self.rng.uniform(0, self.max_delay) if disturb and self.max_delay else 0.0
+                if delay:
+                    self.stats["delayed"] += 1
                     self._pending += 1
-                threading.Timer(delay, self._send, (data, copies, True)).start()
-            else:
+                    timer = threading.Timer(delay, self._send, (data, copies, True))
+                    self._timers.append(timer)
+                    timer.start()
+            if not delay:
                 self._send(data, copies)
 
     def _send(self, data, copies, delayed=False):
@@ -73,18 +78,15 @@ class LossyLink:
             self._pending -= delayed
 
     def drained(self, sent, received):
-        """Whether the ``sent`` datagrams all reached the relay and all it sent on were ``received``.
-
-        On loopback nothing is lost, so a loaded machine delays this but cannot make it false
-        for good; the server stops waiting after its ``linger`` anyway.
-        """
+        """Whether the ``sent`` datagrams all reached the relay and all it sent on were ``received``."""
         with self._lock:
             return self.stats["in"] == sent and self._pending == 0 and self.stats["out"] == received
 
     def close(self):
         self._stop.set()
-        self.thread.join(timeout=2)
-        time.sleep(0.05)  # let delayed copies go out
+        self.thread.join(timeout=30)
+        for timer in self._timers:  # delayed copies are out before the sockets close
+            timer.join(timeout=30)
         self.sock.close()
         self._out.close()
 
@@ -98,19 +100,34 @@ def live(
     time_scale,
     link=None,
     hostile=None,
-    hold_back=0.05,
+    hold_back=None,
     trace=None,
     broker=None,
+    token=None,
+    marks=None,
 ):
     """Run the server and one sensor thread per node on loopback; return (snapshot, server, extras).
 
-    With ``broker = (host, port)`` the packets go through MQTT instead of UDP.
+    The run ends when every sender is done and the service has received every datagram
+    sent to it (counted by verdict), not after some wall time: a loaded machine makes the
+    run slower, not different. ``hold_back`` defaults to the whole run, so the observer
+    applies every packet at its sample time however late it arrives; a test of lateness
+    passes a smaller one. ``hostile(port, sent, send)`` runs in a thread after the nodes'
+    initial packets and sends its datagrams with ``send`` (it returns how many it sent by
+    other means, e.g. through the broker). With ``broker = (host, port)``
+    the packets go through MQTT instead of UDP.
     """
 
     async def main():
-        core = ObserverCore(problem, KEYS)
-        srv = ObserverServer(core, time_scale=time_scale, hold_back=hold_back, trace=trace)
-        srv.epoch = time.time() + 0.3
+        core = ObserverCore(problem, KEYS, marks=marks)
+        srv = ObserverServer(
+            core,
+            time_scale=time_scale,
+            hold_back=duration if hold_back is None else hold_back,
+            trace=trace,
+            token=token,
+        )
+        srv.epoch = time.time() + 3600  # a placeholder until every sender is connected
         port, web = await srv.start(port=0, http_port=0)
         relay = LossyLink(port, **link) if link else None
         target = relay.port if relay else port
@@ -119,8 +136,7 @@ def live(
         if broker is not None:
             from etobs.runtime.mqtt import MqttReceiver, MqttSender
 
-            receiver = MqttReceiver(*broker, "etobs/test", srv.feed)
-            time.sleep(0.2)  # let the subscription settle before the first packet
+            receiver = MqttReceiver(*broker, "etobs/test", srv.feed)  # returns once subscribed
 
         def sender(i=0):
             udp = MqttSender(*broker, "etobs/test", i) if broker else udp_sender("127.0.0.1", target)
@@ -132,11 +148,12 @@ def live(
 
             return send
 
+        senders = [sender(i) for i in range(problem.n_nodes)]
+        srv.epoch = time.time() + 0.3  # once every sender is connected
         nodes = [
-            SensorNode(i, KEYS[i], SampledRule(nd.rule.sensor_spec(), period), sender(i))
+            SensorNode(i, KEYS[i], SampledRule(nd.rule.sensor_spec(), period), senders[i], session=srv.epoch)
             for i, nd in enumerate(problem.nodes)
         ]
-        srv.epoch = time.time() + 0.3  # once every sender is connected
         threads = [
             threading.Thread(
                 target=run,
@@ -153,46 +170,77 @@ def live(
         ]
         for th in threads:
             th.start()
-        extra = {}
+        extra = {"hostile_sent": 0}
         if hostile is not None:
-            extra["hostile"] = threading.Thread(target=hostile, args=(port, sent, srv.epoch), daemon=True)
+            hostile_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            hostile_sock.bind(("127.0.0.1", 0))
+
+            def attack():
+                for _ in range(600_000):  # genuine traffic to capture: the initial packets
+                    if len(sent) >= problem.n_nodes:
+                        break
+                    time.sleep(0.001)
+
+                def send(data):
+                    hostile_sock.sendto(data, ("127.0.0.1", port))
+                    extra["hostile_sent"] += 1
+                    # one datagram at a time: a burst would overflow the socket's buffer,
+                    # and the test is about verdicts, not about a flood
+                    for _ in range(600_000):
+                        if srv.received >= extra["hostile_sent"] + len(sent):
+                            break
+                        time.sleep(0.0001)
+
+                other = hostile(port, list(sent), send) or 0  # sent some other way
+                extra["hostile_sent"] += other
+
+            extra["hostile"] = threading.Thread(target=attack, daemon=True)
             extra["hostile"].start()
 
         def finished():
-            # the senders are done and, behind a relay, everything it sent on has arrived:
-            # stopping earlier would leave datagrams unread and the counts short
-            if any(th.is_alive() for th in threads):
+            # the senders are done and everything sent has arrived and been judged: stopping
+            # earlier would leave datagrams unread and the counts short
+            if any(th.is_alive() for th in threads) or ("hostile" in extra and extra["hostile"].is_alive()):
                 return False
-            return relay is None or relay.drained(len(sent), sum(core.counts.values()))
+            if relay is not None:
+                return relay.drained(len(sent), sum(core.counts.values()) - extra["hostile_sent"])
+            return sum(core.counts.values()) >= len(sent) + extra["hostile_sent"]
 
-        snap = await asyncio.wait_for(
-            srv.run_until(duration, finished=finished), timeout=60 + duration / time_scale
-        )
-        for th in threads:
-            th.join(timeout=5)
-        for udp in sockets:
-            udp.close()
-        if receiver is not None:
-            receiver.close()
-        if "hostile" in extra:
-            extra["hostile"].join(timeout=5)
-        extra["estimate"] = await _get(web)
-        await srv.close()
-        if relay:
-            relay.close()
-            extra["link"] = relay.stats
+        try:
+            # the time limits only end a broken run: a healthy one ends when finished() says so
+            snap = await asyncio.wait_for(srv.run_until(duration, finished=finished, linger=300), timeout=600)
+            for th in threads:
+                th.join(timeout=30)
+            if "hostile" in extra:
+                extra["hostile"].join(timeout=30)
+            extra["estimate"] = await _get(web, token)
+        finally:
+            for udp in sockets:
+                udp.close()
+            if receiver is not None:
+                receiver.close()
+            if hostile is not None:
+                hostile_sock.close()
+            await srv.close()
+            if relay:
+                relay.close()
+                extra["link"] = relay.stats
         extra["nodes"] = nodes
+        extra["sent"] = sent
         return snap, srv, extra
 
     return asyncio.run(main())
 
 
-async def _get(port):
+async def _get(port, token=None, path="/estimate"):
+    """``GET path`` from the service's HTTP endpoint: (status line, body)."""
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
-    writer.write(b"GET /estimate HTTP/1.0\r\n\r\n")
+    auth = b"" if token is None else b"Authorization: Bearer " + token + b"\r\n"
+    writer.write(f"GET {path} HTTP/1.0\r\n".encode() + auth + b"\r\n")
     await writer.drain()
-    data = await asyncio.wait_for(reader.read(), timeout=5)
+    data = await asyncio.wait_for(reader.read(), timeout=30)
     writer.close()
+    await writer.wait_closed()
     head, _, body = data.partition(b"\r\n\r\n")
     return head.split(b"\r\n")[0].decode(), body
 

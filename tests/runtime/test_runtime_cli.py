@@ -1,7 +1,9 @@
-"""``etobs demo live``, ``etobs sensor`` as a process that is killed and restarted, spec errors."""
+"""``etobs demo live``, ``etobs sensor`` as a process that is killed and restarted, and every
+mistake of ``serve``/``sensor`` as one line and exit 2."""
 
 import json
 import os
+import re
 import signal
 import socket
 import struct
@@ -32,60 +34,73 @@ x0 = [1.0, -0.5]
 """
 
 
+def _secret(folder):
+    """A deployment secret, mode 600 as a secret file must be."""
+    path = folder / "secret.key"
+    path.write_bytes(os.urandom(32))
+    path.chmod(0o600)
+    return path
+
+
 def test_demo_live_matches_its_reference(tmp_path, capsys):
-    assert main(["demo", "live", "--out", str(tmp_path), "--duration", "2", "--time-scale", "4"]) == 0
-    out = capsys.readouterr().out
-    s = json.loads((tmp_path / "summary.json").read_text())
+    """The robot arm with its observer holding packets back for the whole run: live,
+    sensors and reference agree on every transmission, and the estimates to 1e-6,
+    however loaded the machine."""
+    spec = tmp_path / "arm.toml"
+    spec.write_text(
+        '[system]\nfactory = "robot_arm"\n[runtime]\nperiod = 0.002\nduration = 2.0\n'
+        "time_scale = 4.0\nhold_back = 2.0\n[plant]\nx0 = [3.0, 2.0, 3.0, -2.0]\n"
+    )
+    out = tmp_path / "out"
+    assert main(["demo", "live", "--spec", str(spec), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    s = json.loads((out / "summary.json").read_text())
     assert s["transmissions_live"] == s["transmissions_reference"] == s["transmissions_sensors"]
-    assert s["final_gap"] < 1e-4 and s["late"] == 0
-    assert "transmissions per node: live" in out and (tmp_path / "trace.jsonl").is_file()
-    assert (tmp_path / "trace.png").stat().st_size > 10_000
-    assert oct((tmp_path / "etobs.secret").stat().st_mode & 0o777) == "0o600"
+    assert s["final_gap"] < 1e-6 * max(map(abs, s["final_xhat_reference"])) and s["late"] == 0
+    assert s["gaps"] == [0, 0] and s["status"] == "ok"
+    assert "transmissions per node: live" in printed and (out / "trace.jsonl").is_file()
+    assert (out / "trace.png").stat().st_size > 10_000
+    assert oct((out / "etobs.secret").stat().st_mode & 0o777) == "0o600"
+    marks = json.loads((out / "etobs.state").read_text())["nodes"]  # the service's high-water marks
+    assert [marks[str(i)]["seq"] for i in range(2)] == [n + 1 for n in s["transmissions_live"]]
 
 
 def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
     """A sensor process is killed (SIGKILL) after it has sent packets and started again
     with the same state file and epoch: it joins at the current time, every packet of
-    both runs is accepted, none is stale or replayed, sequence numbers keep increasing."""
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", 0))
-    rx.settimeout(0.2)
+    both runs is accepted, none is stale or replayed, sequence numbers keep increasing.
+
+    The epoch is given once the process is ready (its plant samples computed), and the
+    run lasts a minute of wall time; each start waits for six packets, however slowly."""
     spec = tmp_path / "deploy.toml"
-    spec.write_text(SPEC.format(duration=120.0, scale=4.0, port=rx.getsockname()[1]))
-    (tmp_path / "secret.key").write_bytes(os.urandom(32))
-    epoch = repr(time.time())
-    cmd = [
-        sys.executable,
-        "-m",
-        "etobs",
-        "sensor",
-        str(spec),
-        "--node",
-        "0",
-        "--epoch",
-        epoch,
-        "--state",
-        str(tmp_path / "n0.seq"),
-    ]
-    got = []
-
-    def collect(until_count, seconds):
-        end = time.time() + seconds
-        while time.time() < end and len(got) < until_count:
+    secret = _secret(tmp_path)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rx:
+        rx.bind(("127.0.0.1", 0))
+        rx.settimeout(1.0)
+        spec.write_text(SPEC.format(duration=600.0, scale=10.0, port=rx.getsockname()[1]))
+        cmd = [sys.executable, "-m", "etobs", "sensor", str(spec), "--node", "0", "--epoch", "-"]
+        cmd += ["--state", str(tmp_path / "n0.seq")]
+        got, epoch = [], None
+        for run in range(2):
+            before = len(got)
+            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
             try:
-                got.append(rx.recv(4096))
-            except TimeoutError:
-                pass
-
-    for run in range(2):
-        before = len(got)
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        collect(before + 6, 60.0)  # bounded: 60 s at most, 6 packets per run
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
-        assert len(got) >= before + 6, f"run {run}: only {len(got) - before} packets"
-    rx.close()
-    core = ObserverCore(linear.factory(), node_keys((tmp_path / "secret.key").read_bytes(), [0]))
+                assert proc.stdout.readline().strip() == "ready"
+                epoch = epoch or repr(time.time())
+                proc.stdin.write(epoch + "\n")
+                proc.stdin.flush()
+                for _ in range(300):  # at most 300 s: only a broken run gets near it
+                    try:
+                        got.append(rx.recv(4096))
+                    except TimeoutError:
+                        assert proc.poll() is None, f"run {run}: the sensor exited ({proc.returncode})"
+                    if len(got) >= before + 6:
+                        break
+            finally:
+                proc.send_signal(signal.SIGKILL)
+                proc.communicate(timeout=60)
+            assert len(got) >= before + 6, f"run {run}: only {len(got) - before} packets"
+    core = ObserverCore(linear.factory(), node_keys(secret.read_bytes(), [0]), session=float(epoch))
     verdicts = [core.receive(d) for d in got]
     assert verdicts.count("initial") == 2 and set(verdicts) <= {"initial", "applied"}
     seqs = [struct.unpack(">Q", d[8:16])[0] for d in got]
@@ -93,21 +108,96 @@ def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
     assert seqs == sorted(set(seqs))
     second = verdicts.index("initial", 1)
     assert times[second] > times[second - 1]  # the restarted node joined at the current time
+    assert core.snapshot()["gaps"] == [0]
 
 
-def test_runtime_spec_errors(tmp_path):
+def _one_line_error(capsys, argv, match):
+    """``etobs argv`` ends with exit 2 and one line naming the mistake (no traceback)."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("etobs: error:") and "Traceback" not in err, err
+    assert re.search(match, lines[0]), lines[0]
+
+
+LINEAR = 'factory = "tests.estimation.linear:factory"'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "argv", "match"),
+    [
+        ("", "", ["--epoch", "nan"], r"--epoch must be a time.time\(\) value .*; got nan"),
+        ("", "", ["--epoch", "inf"], r"--epoch must be a time.time\(\) value .*; got inf"),
+        ("", "", ["--epoch", "soon"], r"--epoch must be a time.time\(\) value .*; got 'soon'"),
+        ("", "", ["--epoch", "99999999999"], r"--epoch 99999999999.0 lies .* s ahead .* at most 3600 s"),
+        ("", "", ["--epoch", "1000"], r"--epoch 1000.0: that run ended .* s ago"),
+        (
+            '"127.0.0.1"',
+            '"no.such.host.invalid"',
+            [],
+            r"cannot receive packets on UDP no.such.host.invalid:0",
+        ),
+        (
+            LINEAR,
+            'factory = "robot_arm"\nparams = {bogus = 1}',
+            [],
+            r"`bogus` \(system.params\) is not an arg",
+        ),
+        ("[plant]", 'transport = "mqtt"\nbroker = "127.0.0.1:{closed}"\n[plant]', [], r"`runtime.broker`"),
+    ],
+)
+def test_serve_mistakes_are_one_line(tmp_path, capsys, old, new, argv, match):
+    """Each of these printed a traceback (or hung, for the far epoch) before."""
+    _secret(tmp_path)
+    with socket.socket() as closed:  # bound, never listening: a broker that refuses
+        closed.bind(("127.0.0.1", 0))
+        text = SPEC.format(duration=1.0, scale=1.0, port=0)
+        text = text.replace(old, new.replace("{closed}", str(closed.getsockname()[1]))) if old else text
+        (tmp_path / "deploy.toml").write_text(text)
+        _one_line_error(capsys, ["serve", str(tmp_path / "deploy.toml"), *argv], match)
+
+
+def test_a_port_in_use_and_a_readable_secret_are_one_line(tmp_path, capsys):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        spec = tmp_path / "deploy.toml"
+        spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=taken.getsockname()[1]))
+        secret = _secret(tmp_path)
+        _one_line_error(capsys, ["serve", str(spec)], r"cannot receive packets on UDP 127.0.0.1:\d+ .*in use")
+    secret.chmod(0o640)
+    _one_line_error(
+        capsys,
+        ["serve", str(spec)],
+        rf"`runtime.secret_file` '.*secret.key' has mode 0640: the group or others may read it; run "
+        rf"`chmod 600 {secret}`",
+    )
+    _one_line_error(capsys, ["sensor", str(spec), "--node", "0", "--epoch", repr(time.time())], r"mode 0640")
+
+
+def test_runtime_spec_errors(tmp_path, capsys):
     spec = tmp_path / "deploy.toml"
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=70000))
-    with pytest.raises(SystemExit) as e:
-        main(["serve", str(spec)])
-    assert e.value.code == 2
+    _one_line_error(capsys, ["serve", str(spec)], r"`runtime.port` must be <= 65535; got 70000")
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0))
     with pytest.raises(SystemExit) as e:
         main(["sensor", str(spec), "--node", "0"])  # no --epoch: argparse names it
-    assert e.value.code == 2
-    with pytest.raises(SystemExit) as e:
-        main(["sensor", str(spec), "--node", "0", "--epoch", "nan"])
-    assert e.value.code == 2
+    assert e.value.code == 2 and "--epoch" in capsys.readouterr().err
+    _secret(tmp_path)  # so that the epoch is what is checked
+    _one_line_error(
+        capsys, ["sensor", str(spec), "--node", "0", "--epoch", "nan"], r"--epoch must be .* got nan"
+    )
+    spec.write_text(
+        SPEC.format(duration=1.0, scale=1.0, port=0).replace(
+            'host = "127.0.0.1"', 'host = "no.such.host.invalid"'
+        )
+    )
+    _one_line_error(
+        capsys,
+        ["sensor", str(spec), "--node", "0", "--epoch", repr(time.time())],
+        r"cannot resolve the service's host 'no.such.host.invalid'",
+    )
 
 
 @pytest.mark.parametrize(
@@ -116,6 +206,8 @@ def test_runtime_spec_errors(tmp_path):
         ("port = 0", None),
         ("port = 70000", r"`runtime.port` must be <= 65535; got 70000"),
         ("period = 0.005\nbogus = 1", r"unknown key `runtime.bogus`"),
+        ("period = 0.005\nmax_value = -1", r"`runtime.max_value`"),
+        ("period = 0.005\nstate_file = 3", r"`runtime.state_file` must be a file name; got 3"),
     ],
 )
 def test_deployment_parsing(tmp_path, change, message):
@@ -134,9 +226,36 @@ def test_deployment_parsing(tmp_path, change, message):
     if message is None:
         dep = parse_deployment(raw, tmp_path)
         assert dep.secret_file == tmp_path / "secret.key" and dep.x0 == (1.0, -0.5)
+        assert dep.marks_file == tmp_path / "secret.state" and dep.token_file is None
         with pytest.raises(SpecError, match=r"does not exist; `etobs serve` creates it"):
             dep.secret()
         assert len(dep.secret(create=True)) == 32
     else:
         with pytest.raises(SpecError, match=message):
             parse_deployment(raw, tmp_path)
+
+
+def test_the_http_token_file(tmp_path):
+    """Off loopback the token is created (mode 600) next to the secret; a token file given
+    is read, and refused when others may read it."""
+    import tomllib
+    from dataclasses import replace
+
+    from etobs.experiments.spec import SpecError
+    from etobs.runtime.deployment import parse_deployment
+
+    text = SPEC.format(duration=1.0, scale=1.0, port=0).replace("[plant]", "http_port = 0\n[plant]")
+    dep = parse_deployment(tomllib.loads(text), tmp_path)
+    assert dep.token() is None  # loopback: no token unless asked for
+    exposed = replace(dep, http_host="192.0.2.1")
+    token = exposed.token()
+    assert len(token) >= 32 and exposed.token_file == tmp_path / "secret.http-token"
+    assert oct(exposed.token_file.stat().st_mode & 0o777) == "0o600" and exposed.token() == token
+    given = tmp_path / "my.token"
+    given.write_text("short")
+    given.chmod(0o600)
+    with pytest.raises(SpecError, match=r"`runtime.http_token_file` .* at least 16 printable"):
+        replace(dep, http_token_file=given).token()
+    given.chmod(0o604)
+    with pytest.raises(SpecError, match=r"has mode 0604: .* run `chmod 600"):
+        replace(dep, http_token_file=given).token()

@@ -9,6 +9,12 @@ time). ``--epoch -`` reads it from standard input (how ``demo live`` starts ever
 process at once after they are ready). ``demo live`` starts the service
 in this process and one sensor process per node on 127.0.0.1, then compares the live
 run with the offline reference (same sensors and observer, no network).
+
+The epoch is also the session every packet carries: a packet of another run is refused
+(``wrong_session``), and ``serve`` keeps the nodes' high-water marks in
+``runtime.state_file``, so a packet it applied is refused after any restart. Every
+mistake (a bad spec value, an epoch far off, a port in use, an unknown host, an
+unreachable broker) ends with one line naming it and exit 2.
 """
 
 from __future__ import annotations
@@ -29,6 +35,8 @@ from etobs.errors import InputError
 from etobs.runtime.deployment import Deployment, parse_deployment
 
 PACKAGED = {"robot_arm": "robot_arm_live.toml"}
+#: A simulated sensor computes every sample of its plant before it starts.
+MAX_SIMULATED_SAMPLES = 1e7
 
 
 def load(name: str) -> Deployment:
@@ -45,6 +53,13 @@ def add_parsers(sub: Any) -> None:
         "--epoch", default=None, help="time.time() of service time 0, or '-' to read it from stdin"
     )
     p.add_argument("--trace", type=Path, default=None, help="write the trace (JSON lines) here")
+    p.add_argument(
+        "--linger",
+        type=_seconds,
+        default=0.0,
+        help="wall seconds to keep taking packets after the run's end, the observer held "
+        "hold_back short of it (default 0)",
+    )
     p.set_defaults(func=run_serve)
     s = sub.add_parser("sensor", help="run one sensor node on the spec's simulated plant")
     s.add_argument("spec", metavar="SPEC", help=f"deployment TOML, or a packaged one: {', '.join(PACKAGED)}")
@@ -79,7 +94,21 @@ def add_demo(cases: Any) -> None:
     p.set_defaults(func=run_demo_live)
 
 
-def _epoch(value: str | None) -> float:
+def _seconds(text: str) -> float:
+    """An argparse type: a finite number of seconds ``>= 0`` (at most a day)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value <= 86400:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds in 0..86400; got {text!r}")
+    return value
+
+
+def _epoch(value: str | None, dep: Deployment) -> float:
+    """The epoch ``--epoch`` gives (``-``: a line of stdin; None: now), checked for ``dep``'s run."""
+    from etobs.runtime.sensor import check_epoch
+
     if value is None:
         return time.time()
     if value == "-":
@@ -87,50 +116,82 @@ def _epoch(value: str | None) -> float:
     try:
         epoch = float(value)
     except ValueError:
-        epoch = float("nan")
-    if not np.isfinite(epoch) or epoch <= 0:
-        raise InputError(f"--epoch must be a time.time() value (seconds since 1970) or '-'; got {value!r}")
-    return epoch
+        raise InputError(
+            f"--epoch must be a time.time() value (seconds since 1970) or '-'; got {value!r}"
+        ) from None
+    return check_epoch(epoch, dep.duration, dep.time_scale, time.time(), "--epoch")
+
+
+async def _open(srv: Any, dep: Deployment) -> tuple[int, int | None]:
+    """Open ``srv``'s endpoints as ``dep`` says; an error names the spec's keys."""
+    try:
+        return await srv.start(dep.host, dep.port, dep.http_port, dep.http_host)
+    except InputError as exc:
+        raise InputError(f"[runtime] {exc}") from exc
+
+
+def _mqtt(make: Any, dep: Deployment, *args: Any) -> Any:
+    """An MQTT client of ``dep``; an unreachable broker or a missing paho is one line."""
+    try:
+        return make(*dep.broker, dep.topic, *args)
+    except (ConnectionError, ImportError) as exc:
+        raise InputError(f"`runtime.broker` = '{dep.broker[0]}:{dep.broker[1]}': {exc}") from exc
 
 
 def run_serve(args: argparse.Namespace) -> int:
     """The observer service until the spec's duration; print the final snapshot."""
+    from etobs.runtime.marks import HighWaterMarks
     from etobs.runtime.packet import node_keys
-    from etobs.runtime.server import ObserverServer
+    from etobs.runtime.server import ObserverServer, to_json
     from etobs.runtime.service import ObserverCore
 
     dep = load(args.spec)
     pb = dep.problem()
     keys = node_keys(dep.secret(create=True), range(pb.n_nodes))
-    core = ObserverCore(pb, keys, dt=dep.dt)
+    core = ObserverCore(pb, keys, dt=dep.dt, marks=HighWaterMarks(dep.marks_file), max_value=dep.max_value)
+    token = dep.token()
+    given = None if args.epoch in (None, "-") else _epoch(args.epoch, dep)  # before anything opens
 
     async def main() -> dict[str, Any]:
-        srv = ObserverServer(core, time_scale=dep.time_scale, hold_back=dep.hold_back, trace=args.trace)
+        srv = ObserverServer(
+            core, time_scale=dep.time_scale, hold_back=dep.hold_back, trace=args.trace, token=token
+        )
         srv.epoch = time.time()  # replaced below once the endpoints are open
-        udp, web = await srv.start(dep.host, dep.port, dep.http_port)
+        udp, web = await _open(srv, dep)
         receiver = None
         try:
             where = f"UDP {dep.host}:{udp}"
             if dep.transport == "mqtt":
                 from etobs.runtime.mqtt import MqttReceiver
 
-                receiver = MqttReceiver(*dep.broker, dep.topic, srv.feed)
+                receiver = await asyncio.to_thread(_mqtt, MqttReceiver, dep, srv.feed)
                 where += f" and MQTT {dep.broker[0]}:{dep.broker[1]} {dep.topic}/node/+"
-            web_note = f", GET http://{dep.host}:{web}/estimate" if web else ""
+            web_note = f", GET http://{dep.http_host}:{web}/estimate" if web else ""
+            if token is not None:
+                web_note += f" (Authorization: Bearer <the token in {dep.token_file}>)"
             print(f"etobs serve: {where}{web_note}", file=sys.stderr, flush=True)
-            srv.epoch = await asyncio.to_thread(_epoch, args.epoch)  # stdin is read off the event loop
+            # stdin is read off the event loop
+            srv.epoch = given if given is not None else await asyncio.to_thread(_epoch, args.epoch, dep)
             print(
                 f"etobs serve: epoch {srv.epoch!r} (give it to every sensor: --epoch)",
                 file=sys.stderr,
                 flush=True,
             )
+            if args.linger:  # the observer waits hold_back short of the end for late packets
+                return await srv.run_until(dep.duration, finished=lambda: False, linger=args.linger)
             return await srv.run_until(dep.duration)
         finally:
             if receiver is not None:
                 receiver.close()
             await srv.close()
 
-    print(json.dumps(asyncio.run(main())))
+    try:
+        snap = asyncio.run(main())
+    except KeyboardInterrupt:  # Ctrl-C: the state so far, no traceback
+        print("etobs serve: interrupted", file=sys.stderr)
+        print(to_json(core.snapshot()))
+        return 130
+    print(to_json(snap))
     return 0
 
 
@@ -147,25 +208,26 @@ def run_sensor(args: argparse.Namespace) -> int:
         raise InputError(f"--node must be in 0..{pb.n_nodes - 1}; got {args.node}")
     if dep.x0 is None:
         raise InputError("the spec has no [plant] x0: a simulated sensor needs the plant's initial state")
-    _, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
+    if dep.duration / dep.period > MAX_SIMULATED_SAMPLES:
+        raise InputError(
+            f"`runtime.duration` / `runtime.period` = {dep.duration / dep.period:.3g} samples; a simulated "
+            f"sensor computes its plant's samples first, at most {MAX_SIMULATED_SAMPLES:.0e}"
+        )
     outputs = list(pb.nodes[args.node].outputs)
-    state = args.state or dep.secret_file.with_name(f"node{args.node}.seq")
+    key = derive_key(dep.secret(), args.node)
+    seq = SequenceStore(args.state or dep.secret_file.with_name(f"node{args.node}.seq"))
     if dep.transport == "mqtt":
         from etobs.runtime.mqtt import MqttSender
 
-        sender: Any = MqttSender(*dep.broker, dep.topic, args.node)
+        sender: Any = _mqtt(MqttSender, dep, args.node)
     else:
         sender = udp_sender(dep.host, dep.port)
     with sender as send:
-        node = SensorNode(
-            args.node,
-            derive_key(dep.secret(), args.node),
-            SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period),
-            send,
-            SequenceStore(state),
-        )
+        _, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
         print("ready", flush=True)
-        epoch = _epoch(args.epoch)
+        epoch = _epoch(args.epoch, dep)
+        rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
+        node = SensorNode(args.node, key, rule, send, seq, session=epoch)
         n = run(
             node,
             lambda t: y[round(t / dep.period), outputs],
@@ -182,6 +244,7 @@ def run_demo_live(args: argparse.Namespace) -> int:
     """Service here, sensors as processes; compare with the offline reference."""
     from dataclasses import replace
 
+    from etobs.runtime.marks import HighWaterMarks
     from etobs.runtime.packet import node_keys
     from etobs.runtime.replay import replay, sample_outputs
     from etobs.runtime.server import ObserverServer, read_trace
@@ -201,7 +264,7 @@ def run_demo_live(args: argparse.Namespace) -> int:
     )
     pb = dep.problem()
     keys = node_keys(dep.secret(create=True), range(pb.n_nodes))
-    core = ObserverCore(pb, keys, dt=dep.dt)
+    core = ObserverCore(pb, keys, dt=dep.dt, marks=HighWaterMarks(dep.marks_file), max_value=dep.max_value)
 
     async def main() -> tuple[dict[str, Any], list[dict[str, Any]]]:
         srv = ObserverServer(
@@ -281,9 +344,11 @@ def run_demo_live(args: argparse.Namespace) -> int:
         "final_xhat_reference": [float(v) for v in ref.xhat[-1]],
         "final_gap": gap,
         "counts": snap["counts"],
+        "gaps": snap["gaps"],
         "late": snap["late"],
+        "status": snap["status"],
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
     tr = read_trace(out / "trace.jsonl")
     try:
         from etobs.plot import plot_trace
@@ -299,7 +364,8 @@ def run_demo_live(args: argparse.Namespace) -> int:
     )
     lines = len(tr["t"])
     print(
-        f"packets: {snap['counts']}; applied late: {snap['late']}; trace: {lines} lines in {out}/trace.jsonl"
+        f"packets: {snap['counts']}; missing sequence numbers: {snap['gaps']}; applied late: "
+        f"{snap['late']}; trace: {lines} lines in {out}/trace.jsonl"
     )
     same = list(ref.transmissions) == list(snap["transmissions"])
     return 0 if same else 1

@@ -13,9 +13,14 @@ TOML (the packaged ``robot_arm`` is ``runtime/data/robot_arm_live.toml``)::
     host = "127.0.0.1"
     port = 47100                   # UDP, the observer's
     http_port = 47101              # GET /estimate
+    http_host = "127.0.0.1"        # where GET /estimate listens (apart from the UDP host)
+    http_token_file = "etobs.http-token"  # its bearer token; required off loopback
     dt = 0.001                     # observer integration step
     hold_back = 0.05               # observer runs this far behind the clock [s]
-    secret_file = "etobs.secret"   # 32 random bytes; per-node keys derive from it
+    secret_file = "etobs.secret"   # 32 random bytes; per-node keys derive from it (mode 600)
+    state_file = "etobs.state"     # the service's high-water marks (default: the secret's
+                                   # name with .state)
+    max_value = 1e12               # larger (or non-finite) values are refused
     transport = "udp"              # or "mqtt" (extra `mqtt`), with:
     broker = "127.0.0.1:1883"      # the MQTT broker
     topic = "etobs/robot_arm_live" # nodes publish on <topic>/node/<i>
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +41,34 @@ from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs.estimation.problem import EstimationProblem
-from etobs.examples.registry import resolve_factory
+from etobs.examples.registry import make_problem
+from etobs.runtime.server import is_loopback
+
+
+def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
+    """The bytes of the secret file ``path`` (named ``key`` in errors), refused if others can read it.
+
+    With ``create`` a missing file is written with those bytes, mode 600. A file that the
+    group or others may read is refused, naming its mode and the fix: its holder could
+    forge packets (the deployment secret) or read the estimate (the HTTP token).
+    """
+    if not path.exists():
+        if create is None:
+            raise SpecError(f"`{key}` {str(path)!r} does not exist; `etobs serve` creates it")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(create)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+        if os.name == "posix" and mode & 0o077:
+            raise SpecError(
+                f"`{key}` {str(path)!r} has mode {mode:04o}: the group or others may read it; "
+                f"run `chmod 600 {path}`"
+            )
+        return path.read_bytes()
+    except OSError as exc:
+        raise SpecError(f"`{key}` {str(path)!r} cannot be read: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -58,34 +91,57 @@ class Deployment:
     transport: str = "udp"
     broker: tuple[str, int] = ("127.0.0.1", 1883)
     topic: str = "etobs/deployment"
+    http_host: str = "127.0.0.1"
+    http_token_file: Path | None = None
+    state_file: Path | None = None
+    max_value: float = 1e12
 
     def problem(self) -> EstimationProblem:
-        """The estimation problem of ``[system]``."""
-        pb = resolve_factory(self.factory)(**self.params)
-        if not isinstance(pb, EstimationProblem):
-            raise SpecError(
-                f"the factory {self.factory!r} returned {type(pb).__name__}, not an EstimationProblem"
-            )
-        return pb
+        """The estimation problem of ``[system]`` (a factory marked with :func:`etobs.factory`)."""
+        return make_problem(self.factory, self.params, "system.params")
 
     def secret(self, *, create: bool = False) -> bytes:
         """The deployment secret; with ``create`` a new one is written (mode 600) if missing."""
-        path = self.secret_file
-        if not path.exists():
-            if not create:
-                raise SpecError(
-                    f"`runtime.secret_file` {str(path)!r} does not exist; `etobs serve` creates it"
-                )
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(secrets.token_bytes(32))
-        data = path.read_bytes()
+        data = read_secret(
+            self.secret_file, "runtime.secret_file", create=secrets.token_bytes(32) if create else None
+        )
         if len(data) < 16:
             raise SpecError(
-                f"`runtime.secret_file` {str(path)!r} holds {len(data)} bytes; at least 16 are needed"
+                f"`runtime.secret_file` {str(self.secret_file)!r} holds {len(data)} bytes; "
+                "at least 16 are needed"
             )
         return data
+
+    @property
+    def marks_file(self) -> Path:
+        """The service's high-water marks: ``state_file``, or the secret's name with ``.state``."""
+        return self.state_file or self.secret_file.with_suffix(".state")
+
+    @property
+    def token_file(self) -> Path | None:
+        """Where the HTTP token is, if ``GET /estimate`` needs one (set, or off loopback)."""
+        if self.http_port is None:
+            return None
+        if self.http_token_file is not None:
+            return self.http_token_file
+        if is_loopback(self.http_host):
+            return None
+        return self.secret_file.with_name(self.secret_file.stem + ".http-token")
+
+    def token(self) -> bytes | None:
+        """The bearer token of ``GET /estimate`` (created, mode 600, if missing), or None."""
+        path = self.token_file
+        if path is None:
+            return None
+        token = read_secret(
+            path, "runtime.http_token_file", create=secrets.token_urlsafe(32).encode()
+        ).strip()
+        if len(token) < 16 or not all(33 <= b < 127 for b in token):
+            raise SpecError(
+                f"`runtime.http_token_file` {str(path)!r} must hold at least 16 printable ASCII "
+                f"characters (no spaces); it holds {len(token)} bytes"
+            )
+        return token
 
 
 def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
@@ -110,6 +166,10 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
             "transport",
             "broker",
             "topic",
+            "http_host",
+            "http_token_file",
+            "state_file",
+            "max_value",
         },
     )
     transport = rt.get("transport", "udp")
@@ -142,7 +202,19 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
         if not isinstance(x0, list) or not x0:
             raise SpecError(f"`plant.x0` must be a list of numbers; got {x0!r}")
         x0 = tuple(float(_number(f"plant.x0[{i}]", v)) for i, v in enumerate(x0))
-    secret_file = Path(rt.get("secret_file", "etobs.secret"))
+    http_host = rt.get("http_host", "127.0.0.1")
+    if not isinstance(http_host, str) or not http_host:
+        raise SpecError(f"`runtime.http_host` must be a host name or address; got {http_host!r}")
+
+    def path(key: str, default: str | None) -> Path | None:
+        value = rt.get(key, default)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value:
+            raise SpecError(f"`runtime.{key}` must be a file name; got {value!r}")
+        return Path(value) if Path(value).is_absolute() else base / value
+
+    secret_file = path("secret_file", None) or base / "etobs.secret"
     return Deployment(
         name=name,
         factory=system["factory"],
@@ -155,9 +227,13 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
         http_port=port("http_port", None),
         dt=float(_number("runtime.dt", rt.get("dt", 1e-3), lower=0.0, strict=True)),
         hold_back=float(_number("runtime.hold_back", rt.get("hold_back", 0.05), lower=0.0)),
-        secret_file=secret_file if secret_file.is_absolute() else base / secret_file,
+        secret_file=secret_file,
         x0=x0,
         transport=transport,
         broker=(b_host, int(b_port)),
         topic=topic,
+        http_host=http_host,
+        http_token_file=path("http_token_file", None),
+        state_file=path("state_file", None),
+        max_value=float(_number("runtime.max_value", rt.get("max_value", 1e12), lower=0.0, strict=True)),
     )

@@ -39,7 +39,10 @@ def _connect(
         ready.set()
 
     client.on_connect = connected
-    client.connect(host, port, keepalive=30)
+    try:
+        client.connect(host, port, keepalive=30)
+    except (OSError, ValueError, UnicodeError) as exc:  # refused, unknown host, bad port
+        raise ConnectionError(f"cannot reach the MQTT broker at {host}:{port}: {exc}") from exc
     client.loop_start()
     if not ready.wait(timeout):
         client.loop_stop()

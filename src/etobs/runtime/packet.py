@@ -1,37 +1,46 @@
 """The packet format between sensor nodes and the observer (standard library only).
 
-Version 1, big-endian, 24-byte header, then the values, then the tag::
+Version 2, big-endian, 32-byte header, then the values, then the tag::
 
     offset  size  field
     0       2     magic b"ET"
-    2       1     version (1)
+    2       1     version (2)
     3       1     flags: bit 0 = initial value (sent at start-up, not a transmission)
     4       2     node id (uint16)
     6       2     number of values n (uint16, 1..64)
     8       8     sequence number (uint64, increasing per node, never reused)
-    16      8     sample time (float64, seconds on the node's clock)
-    24      8n    values (float64 each)
-    24+8n   16    tag: HMAC-SHA256 over bytes 0..24+8n with the node's key, first 16 bytes
+    16      8     sample time (float64, seconds on the deployment's clock)
+    24      8     session (float64: the deployment's epoch, the time.time() of time 0)
+    32      8n    values (float64 each)
+    32+8n   16    tag: HMAC-SHA256 over bytes 0..32+8n with the node's key, first 16 bytes
+
+Version 1 had no session field: a packet of one run could be replayed into a later run
+of the service (its sequence numbers were held in memory only). The session binds each
+packet to the clock it was measured on, so the tag of a packet of another run does not
+cover this run's session, and the observer refuses it (``wrong_session``).
 
 The observer checks the tag in constant time (:func:`hmac.compare_digest`) with the key
-of the node the header names, and rejects anything else as malformed or forged.
+of the node the header names, and rejects anything else as malformed or forged. Values
+are carried as sent, including non-finite ones: what an authentic packet may carry is
+the observer's decision (:mod:`etobs.runtime.service`), not the format's.
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
-import math
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 MAGIC = b"ET"
-VERSION = 1
+VERSION = 2
 TAG_BYTES = 16
 MAX_VALUES = 64
 FLAG_INITIAL = 0x01
-HEADER = struct.Struct(">2sBBHHQd")
+HEADER = struct.Struct(">2sBBHHQdd")
+#: The largest datagram the format allows (64 values).
+MAX_BYTES = HEADER.size + 8 * MAX_VALUES + TAG_BYTES
 
 
 class PacketError(ValueError):
@@ -44,13 +53,14 @@ class PacketError(ValueError):
 
 @dataclass(frozen=True)
 class Packet:
-    """One node's measurement as sent: ``values`` taken at time ``t``."""
+    """One node's measurement as sent: ``values`` taken at time ``t`` of session ``session``."""
 
     node: int
     seq: int
     t: float
     values: tuple[float, ...]
     initial: bool = False
+    session: float = 0.0
 
 
 def _tag(key: bytes, body: bytes) -> bytes:
@@ -65,20 +75,22 @@ def encode(packet: Packet, key: bytes) -> bytes:
     if not 0 <= packet.node < 2**16 or not 0 <= packet.seq < 2**64:
         raise ValueError(f"node id must fit in 16 bits and seq in 64; got {packet.node}, {packet.seq}")
     flags = FLAG_INITIAL if packet.initial else 0
-    body = HEADER.pack(MAGIC, VERSION, flags, packet.node, n, packet.seq, packet.t)
+    body = HEADER.pack(MAGIC, VERSION, flags, packet.node, n, packet.seq, packet.t, packet.session)
     body += struct.pack(f">{n}d", *packet.values)
     return body + _tag(key, body)
 
 
 def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
     """Parse and authenticate ``data``; raise :class:`PacketError` on anything wrong."""
+    if len(data) >= 3 and (data[:2] != MAGIC or data[2] != VERSION):  # e.g. a version 1 sensor
+        raise PacketError(
+            "malformed", f"magic {bytes(data[:2])!r} version {data[2]}; expected {MAGIC!r} version {VERSION}"
+        )
     if len(data) < HEADER.size + 8 + TAG_BYTES:
         raise PacketError("malformed", f"{len(data)} bytes is shorter than the smallest packet")
-    magic, version, flags, node, n, seq, t = HEADER.unpack_from(data)
-    if magic != MAGIC or version != VERSION:
-        raise PacketError(
-            "malformed", f"magic {magic!r} version {version}; expected {MAGIC!r} version {VERSION}"
-        )
+    if len(data) > MAX_BYTES:
+        raise PacketError("malformed", f"{len(data)} bytes is longer than the largest packet ({MAX_BYTES})")
+    _, _, flags, node, n, seq, t, session = HEADER.unpack_from(data)
     if not 1 <= n <= MAX_VALUES or len(data) != HEADER.size + 8 * n + TAG_BYTES or flags & ~FLAG_INITIAL:
         raise PacketError("malformed", f"{len(data)} bytes and n = {n} values, flags {flags:#x}, do not fit")
     key = keys.get(node)
@@ -88,9 +100,14 @@ def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
     if not hmac.compare_digest(tag, expected) or key is None:
         raise PacketError("forged", f"authentication failed for node {node}")
     values = struct.unpack_from(f">{n}d", data, HEADER.size)
-    if not all(math.isfinite(x) for x in (t, *values)):
-        raise PacketError("malformed", "non-finite time or value")
-    return Packet(node=node, seq=seq, t=t, values=tuple(values), initial=bool(flags & FLAG_INITIAL))
+    return Packet(
+        node=node,
+        seq=seq,
+        t=t,
+        values=tuple(values),
+        initial=bool(flags & FLAG_INITIAL),
+        session=session,
+    )
 
 
 def derive_key(secret: bytes, node: int) -> bytes:
@@ -101,3 +118,8 @@ def derive_key(secret: bytes, node: int) -> bytes:
 def node_keys(secret: bytes, nodes: Sequence[int]) -> dict[int, bytes]:
     """The keys of ``nodes`` derived from ``secret``."""
     return {i: derive_key(secret, i) for i in nodes}
+
+
+def key_id(key: bytes) -> str:
+    """A short public name of ``key`` (SHA-256, 8 bytes in hex): tells keys apart, reveals nothing."""
+    return hashlib.sha256(b"etobs-key-id" + key).hexdigest()[:16]

@@ -10,7 +10,8 @@ At its first sample the node sends its value flagged *initial* (the observer's s
 ``ybar``; not counted as a transmission), then at every sample ``t_k = k T`` it computes
 ``e_k = ybar - y(t_k)`` against the value it last sent and sends when the rule fires.
 Sequence numbers never repeat, even across restarts: :class:`SequenceStore` reserves
-blocks of them in a file before using them.
+blocks of them in a file before using them. Every packet carries the deployment's session
+(its epoch), which binds it to the run it was measured in.
 """
 
 from __future__ import annotations
@@ -22,8 +23,37 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from etobs.errors import InputError
 from etobs.runtime.packet import Packet, encode
 from etobs.runtime.sampled_rule import SampledRule
+
+#: How far ahead of the clock an epoch may lie: a start further away is a typing mistake,
+#: and the run would wait until then.
+MAX_EPOCH_LEAD = 3600.0
+
+
+def check_epoch(epoch: float, duration: float, time_scale: float, now: float, name: str = "`epoch`") -> float:
+    """``epoch`` if a run of ``duration`` plant seconds from it is not over at ``now``.
+
+    Raises :class:`~etobs.errors.InputError` naming ``name`` for a non-finite or
+    non-positive epoch, one more than :data:`MAX_EPOCH_LEAD` seconds ahead of ``now``, or
+    one whose run ended before ``now``: each would make a process wait for hours or do
+    nothing at all.
+    """
+    if not isinstance(epoch, int | float) or not math.isfinite(epoch) or epoch <= 0:
+        raise InputError(f"{name} must be a time.time() value (seconds since 1970); got {epoch!r}")
+    if epoch > now + MAX_EPOCH_LEAD:
+        raise InputError(
+            f"{name} {epoch!r} lies {epoch - now:.6g} s ahead of this machine's clock; at most "
+            f"{MAX_EPOCH_LEAD:g} s ahead is allowed (use the epoch etobs serve printed)"
+        )
+    wall = duration / time_scale
+    if epoch + wall < now:
+        raise InputError(
+            f"{name} {epoch!r}: that run ended {now - epoch - wall:.6g} s ago (it lasts {wall:.6g} s "
+            "of wall time); use the epoch of the running service"
+        )
+    return float(epoch)
 
 
 class SequenceStore:
@@ -32,7 +62,8 @@ class SequenceStore:
     The file holds an upper bound on every number handed out; a restarted node starts
     from it. Numbers are reserved ``block`` at a time, written atomically before use, so a
     crash skips at most a block and never reuses a number. ``path=None`` keeps them in
-    memory (starting at 1).
+    memory (starting at 1). When the 64-bit numbers run out, :meth:`next` raises: the
+    node needs a new key (rotate the secret) and a new file.
     """
 
     def __init__(self, path: str | os.PathLike[str] | None = None, block: int = 1024) -> None:
@@ -41,8 +72,8 @@ class SequenceStore:
         self._next = 1
         if self.path is not None and self.path.exists():
             text = self.path.read_text().strip()
-            if not text.isdigit():
-                raise ValueError(
+            if not text.isdigit() or int(text) >= 2**64:
+                raise InputError(
                     f"sequence file {self.path} is damaged: {text[:40]!r}; remove it only if the key changes"
                 )
             self._next = int(text)
@@ -50,7 +81,7 @@ class SequenceStore:
         self._reserve()
 
     def _reserve(self) -> None:
-        self._limit = self._next + self.block
+        self._limit = min(self._next + self.block, 2**64 - 1)
         if self.path is not None:
             tmp = self.path.with_name(f".{self.path.name}.tmp")
             with open(tmp, "w") as fh:
@@ -62,6 +93,11 @@ class SequenceStore:
     def next(self) -> int:
         """The next sequence number."""
         if self._next >= self._limit:
+            if self._next >= 2**64 - 1:
+                raise InputError(
+                    f"the sequence numbers of {self.path or 'this node'} are used up; rotate the secret "
+                    "and start a new sequence file"
+                )
             self._reserve()
         n = self._next
         self._next += 1
@@ -77,6 +113,8 @@ class SensorNode:
         Packets sent because the rule fired (the initial value not counted).
     sent : list of float or None
         The value last sent (the node's ``ybar``).
+    session : float
+        The deployment's epoch, carried in every packet (the service refuses another).
 
     """
 
@@ -87,8 +125,11 @@ class SensorNode:
         rule: SampledRule,
         send: Callable[[bytes], object],
         seq: SequenceStore | None = None,
+        *,
+        session: float = 0.0,
     ) -> None:
         self.node, self.key, self.rule, self._send = node, key, rule, send
+        self.session = float(session)
         self.seq = seq if seq is not None else SequenceStore()
         self.sent: list[float] | None = None
         self.transmissions = 0
@@ -98,11 +139,11 @@ class SensorNode:
         y = [float(v) for v in y]
         packet = None
         if self.sent is None:
-            packet = Packet(self.node, self.seq.next(), t, tuple(y), initial=True)
+            packet = Packet(self.node, self.seq.next(), t, tuple(y), initial=True, session=self.session)
             self._emit(packet, y)
         e = [s - v for s, v in zip(self.sent or y, y, strict=True)]
         if self.rule.decide(e, y):
-            packet = Packet(self.node, self.seq.next(), t, tuple(y))
+            packet = Packet(self.node, self.seq.next(), t, tuple(y), session=self.session)
             self._emit(packet, y)
             self.transmissions += 1
         return packet
@@ -116,10 +157,16 @@ class UdpSender:
     """Send each packet as one UDP datagram to ``(host, port)``; close when done.
 
     On loopback the socket is bound to 127.0.0.1, so nothing listens beyond the machine.
+    The host is resolved once, here: a name that does not resolve is an error now, not
+    at the first packet.
     """
 
     def __init__(self, host: str, port: int) -> None:
-        self.address = (host, port)
+        try:
+            info = socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
+        except (socket.gaierror, UnicodeError, OverflowError) as exc:
+            raise InputError(f"cannot resolve the service's host {host!r} (port {port}): {exc}") from exc
+        self.address = info[0][4]
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         if host in ("127.0.0.1", "localhost"):
             self.sock.bind(("127.0.0.1", 0))
@@ -150,22 +197,28 @@ def run(
     *,
     epoch: float | None = None,
     time_scale: float = 1.0,
+    clock: Callable[[], float] = time.time,
+    sleep: Callable[[float], object] = time.sleep,
 ) -> int:
     """Sample at ``t_k = k period`` for ``t_k <= duration``; return the samples taken.
 
-    Node time runs ``time_scale`` times faster than the wall clock from ``epoch`` (a
-    ``time.time()`` value shared with the service; default now), so a test can run a
-    minute of plant time in a second. A node started after the epoch (e.g. restarted)
-    begins at the first sample not yet due; a sample that then falls behind the clock is
-    taken at once (never skipped).
+    Node time runs ``time_scale`` times faster than the wall clock ``clock`` from
+    ``epoch`` (a ``time.time()`` value shared with the service; default now, checked by
+    :func:`check_epoch`), so a test can run a minute of plant time in a second. A node
+    started after the epoch (e.g. restarted) begins at the first sample not yet due; a
+    sample that then falls behind the clock is taken at once (never skipped). ``clock``
+    and ``sleep`` let a test run the node on a clock of its own.
     """
-    start = time.time() if epoch is None else epoch
-    k = max(0, math.ceil((time.time() - start) * time_scale / period - 1e-9))
+    for name, value in (("period", period), ("duration", duration), ("time_scale", time_scale)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
+    start = clock() if epoch is None else check_epoch(epoch, duration, time_scale, clock())
+    k = max(0, math.ceil((clock() - start) * time_scale / period - 1e-9))
     while k * period <= duration + 1e-12:
         t = k * period
-        wait = start + t / time_scale - time.time()
+        wait = start + t / time_scale - clock()
         if wait > 0:
-            time.sleep(wait)
+            sleep(wait)
         node.sample(t, read(t))
         k += 1
     return k

@@ -1,23 +1,33 @@
 """The observer service over asyncio: UDP packets in, a JSON endpoint and a trace out.
 
 Service time is ``(time.time() - epoch) * time_scale`` (``time_scale > 1`` runs faster
-than real time, for tests and demos). Every ``tick`` of service time the observer is
-advanced to ``now - hold_back`` and a line is appended to the trace, so a packet that
-arrives within ``hold_back`` of its sample time is applied at that sample time (see
-:class:`~etobs.runtime.service.ObserverCore`). Endpoints listen on the host given (the
-tests use 127.0.0.1 only):
+than real time, for tests and demos). The epoch is also the session every packet must
+carry (:mod:`etobs.runtime.packet`). The observer is advanced to ``now - hold_back``, so
+a packet that arrives within ``hold_back`` of its sample time is applied at that sample
+time (see :class:`~etobs.runtime.service.ObserverCore`). Endpoints:
 
-* UDP: the packets of :mod:`~etobs.runtime.packet`;
-* HTTP ``GET /estimate``: the current estimate and counters as JSON.
+* UDP on ``host``: the packets of :mod:`~etobs.runtime.packet`;
+* HTTP ``GET /estimate`` on ``http_host`` (127.0.0.1 unless set; bound apart from the
+  UDP socket, so a service that takes packets from remote sensors does not also show
+  its estimate to them): the current estimate and counters as JSON. With a ``token`` the
+  request must carry ``Authorization: Bearer <token>`` (compared in constant time); a
+  non-loopback ``http_host`` requires one.
 
-The trace is JSON lines (one object per tick: ``t``, ``xhat``, ``ybar``,
-``transmissions``, ``counts``), read back by :func:`read_trace`.
+The trace is JSON lines, one object per ``tick`` of service time on the grid
+``t = 0, tick, 2 tick, ...`` and one at the end (``t``, ``status``, ``xhat``, ``ybar``,
+``transmissions``, ``gaps``, ``counts``, ...), read back by :func:`read_trace`. The grid
+does not depend on how often the event loop runs, so a loaded machine writes the same
+lines, later.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import hmac
+import ipaddress
 import json
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,7 +35,33 @@ from typing import Any
 
 import numpy as np
 
+from etobs.errors import InputError
+from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
+
+#: Idle or slow HTTP clients are dropped after this many seconds, and at most this many
+#: are served at once: a client cannot hold the service's sockets.
+HTTP_TIMEOUT = 2.0
+HTTP_MAX_CLIENTS = 32
+HTTP_MAX_HEADERS = 32
+#: Turns of the event loop spent reading waiting datagrams at the end of a run (a socket
+#: buffer holds a few thousand packets).
+DRAIN_TURNS = 100_000
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` names this machine only (``localhost`` or a loopback address)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: it may resolve to anything
+        return False
+
+
+def to_json(snapshot: dict[str, Any]) -> str:
+    """``snapshot`` as strict JSON (no NaN or infinity: other readers reject them)."""
+    return json.dumps(snapshot, allow_nan=False)
 
 
 class _Datagrams(asyncio.DatagramProtocol):
@@ -33,7 +69,7 @@ class _Datagrams(asyncio.DatagramProtocol):
         self.server = server
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
-        self.server.core.receive(data, self.server.now())
+        self.server.receive(data)
 
 
 class ObserverServer:
@@ -43,14 +79,17 @@ class ObserverServer:
     ----------
     core : ObserverCore
     epoch : float, optional
-        ``time.time()`` at service time 0 (default: when :meth:`start` runs).
+        ``time.time()`` at service time 0 (default: when :meth:`start` runs); also the
+        session packets must carry.
     time_scale : float
     tick : float
-        Service time between trace lines and observer updates.
+        Service time between trace lines.
     hold_back : float
         How far behind the clock the observer runs, in service time.
     trace : path, optional
         Where to write the trace.
+    token : bytes, optional
+        The bearer token ``GET /estimate`` requires (required on a non-loopback host).
 
     """
 
@@ -63,18 +102,46 @@ class ObserverServer:
         tick: float = 0.01,
         hold_back: float = 0.05,
         trace: str | Path | None = None,
+        token: bytes | None = None,
     ) -> None:
-        self.core, self.epoch, self.time_scale = core, epoch, time_scale
-        self.tick, self.hold_back = tick, hold_back
+        for name, value in (("time_scale", time_scale), ("tick", tick)):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
+        if not (isinstance(hold_back, int | float) and math.isfinite(hold_back) and hold_back >= 0):
+            raise InputError(f"`hold_back` must be a finite number >= 0; got {hold_back!r}")
+        if token is not None and len(token) < 16:
+            raise InputError(f"`token` must have at least 16 bytes; got {len(token)}")
+        self.core, self.time_scale = core, time_scale
+        self.epoch = epoch
+        self.tick, self.hold_back, self.token = tick, hold_back, token
         self.trace_path = None if trace is None else Path(trace)
         self._transport: asyncio.DatagramTransport | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._http: asyncio.Server | None = None
+        self._clients: set[asyncio.Task[None]] = set()
+        self.received = 0  # datagrams handed to the core
+
+    @property
+    def epoch(self) -> float | None:
+        """``time.time()`` at service time 0, and the session of this run's packets."""
+        return self._epoch
+
+    @epoch.setter
+    def epoch(self, value: float | None) -> None:
+        self._epoch = value
+        if value is not None:
+            self.core.session = float(value)
 
     def feed(self, data: bytes) -> None:
         """Hand a datagram to the observer from another thread (e.g. the MQTT client's)."""
         assert self._loop is not None, "start() first"
-        self._loop.call_soon_threadsafe(lambda: self.core.receive(data, self.now()))
+        with contextlib.suppress(RuntimeError):  # the loop has closed: the service is done
+            self._loop.call_soon_threadsafe(self.receive, data)
+
+    def receive(self, data: bytes) -> str:
+        """Judge one datagram now (on the event loop); return its verdict."""
+        self.received += 1
+        return self.core.receive(data, self.now())
 
     def now(self) -> float:
         """Service time."""
@@ -82,47 +149,73 @@ class ObserverServer:
         return (time.time() - self.epoch) * self.time_scale
 
     async def start(
-        self, host: str = "127.0.0.1", port: int = 0, http_port: int | None = None
+        self,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        http_port: int | None = None,
+        http_host: str = "127.0.0.1",
     ) -> tuple[int, int | None]:
         """Open the endpoints; return the UDP and HTTP ports (0 picks free ones)."""
+        if http_port is not None and self.token is None and not is_loopback(http_host):
+            raise InputError(
+                f"GET /estimate on {http_host!r}, not a loopback address, needs a token "
+                "(`runtime.http_token_file`); without one it would show the estimate to anyone"
+            )
         if self.epoch is None:
             self.epoch = time.time()
         loop = self._loop = asyncio.get_running_loop()
-        self._transport, _ = await loop.create_datagram_endpoint(
-            lambda: _Datagrams(self), local_addr=(host, port)
-        )
+        try:
+            self._transport, _ = await loop.create_datagram_endpoint(
+                lambda: _Datagrams(self), local_addr=(host, port)
+            )
+        except (OSError, UnicodeError, OverflowError) as exc:  # in use, unknown host, not ours
+            raise InputError(f"cannot receive packets on UDP {host}:{port} (`host`, `port`): {exc}") from exc
         udp = self._transport.get_extra_info("sockname")[1]
         web = None
         if http_port is not None:
-            self._http = await asyncio.start_server(self._serve_http, host, http_port)
+            try:
+                self._http = await asyncio.start_server(self._serve_http, http_host, http_port, limit=8192)
+            except (OSError, UnicodeError, OverflowError) as exc:
+                self._transport.close()
+                raise InputError(
+                    f"cannot serve GET /estimate on {http_host}:{http_port} (`http_host`, `http_port`): {exc}"
+                ) from exc
             web = self._http.sockets[0].getsockname()[1]
         return udp, web
 
     async def run_until(
         self, t_end: float, *, finished: Callable[[], bool] | None = None, linger: float = 30.0
     ) -> dict[str, Any]:
-        """Tick until service time ``t_end``; return the final snapshot.
+        """Run until service time ``t_end``; return the final snapshot.
 
         With ``finished`` (e.g. "every sensor process has exited"), the observer stays
         ``hold_back`` short of ``t_end`` until it returns True, so that the senders' last
         packets are applied at their sample times; after ``linger`` wall seconds past
-        ``t_end`` it stops anyway.
+        ``t_end`` it stops anyway. The epoch is checked first
+        (:func:`~etobs.runtime.sensor.check_epoch`): one far ahead would wait for years.
         """
         assert self.epoch is not None, "start() first"
+        check_epoch(self.epoch, t_end, self.time_scale, time.time())
         fh = open(self.trace_path, "w") if self.trace_path is not None else None
         give_up = self.epoch + t_end / self.time_scale + linger
+        k = 0  # the next trace line is at k * tick
         try:
-            next_tick = 0.0
             while True:
                 done = finished is None or finished() or time.time() > give_up
+                if done and self.now() >= t_end:  # the last turn: read what has arrived first
+                    await self._drain()
                 target = min(self.now() - self.hold_back, t_end if done else t_end - self.hold_back)
                 if done and self.now() >= t_end:
                     target = t_end
+                while k * self.tick <= target:  # bounded: (target - last target) / tick lines
+                    self.core.advance(min(k * self.tick, t_end))
+                    if fh is not None:
+                        fh.write(to_json(self.core.snapshot()) + "\n")
+                    k += 1
                 self.core.advance(target)
-                if fh is not None and (target >= next_tick or target >= t_end):  # the end always
-                    fh.write(json.dumps(self.core.snapshot()) + "\n")
-                    next_tick = target + self.tick
                 if target >= t_end:
+                    if fh is not None and (k - 1) * self.tick < t_end:  # the end is always a line
+                        fh.write(to_json(self.core.snapshot()) + "\n")
                     break
                 await asyncio.sleep(self.tick / self.time_scale / 2)
             return self.core.snapshot()
@@ -130,39 +223,88 @@ class ObserverServer:
             if fh is not None:
                 fh.close()
 
+    async def _drain(self) -> None:
+        """Read the datagrams already waiting, one per turn of the loop (bounded).
+
+        Packets sent before the senders finished are then counted and applied.
+        """
+        for _ in range(DRAIN_TURNS):
+            before = self.received
+            await asyncio.sleep(0)
+            if self.received == before:
+                return
+
     async def close(self) -> None:
-        """Close the endpoints."""
+        """Close the endpoints; HTTP clients still connected are dropped quietly."""
         if self._transport is not None:
             self._transport.close()
         if self._http is not None:
             self._http.close()
+            for task in list(self._clients):
+                task.cancel()
+            await asyncio.gather(*self._clients, return_exceptions=True)
             await self._http.wait_closed()
 
     async def _serve_http(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        if len(self._clients) >= HTTP_MAX_CLIENTS:
+            writer.close()
+            return
+        self._clients.add(task)
         try:
-            line = await asyncio.wait_for(reader.readline(), timeout=2.0)
-            parts = line.decode("latin-1").split()
-            if len(parts) >= 2 and parts[0] == "GET" and parts[1] == "/estimate":
-                body, status = json.dumps(self.core.snapshot()).encode(), "200 OK"
-            else:
-                body, status = b'{"error": "only GET /estimate"}', "404 Not Found"
+            status, body, extra = await asyncio.wait_for(self._answer(reader), timeout=HTTP_TIMEOUT)
             head = (
-                f"HTTP/1.0 {status}\r\nContent-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
+                f"HTTP/1.0 {status}\r\nContent-Type: application/json\r\n{extra}"
+                f"Content-Length: {len(body)}\r\n\r\n"
             )
             writer.write(head.encode() + body)
             await writer.drain()
-        except (TimeoutError, ConnectionError, UnicodeDecodeError, ValueError):  # ValueError: line too long
+        # a client that is slow, disconnects, sends junk or too long a line; or the service
+        # closing (CancelledError): the connection ends without a traceback
+        except (TimeoutError, ConnectionError, UnicodeDecodeError, ValueError, asyncio.CancelledError):
             pass
         finally:
+            self._clients.discard(task)
             writer.close()
+
+    async def _answer(self, reader: asyncio.StreamReader) -> tuple[str, bytes, str]:
+        parts = (await reader.readline()).decode("latin-1").split()
+        headers = {}
+        for _ in range(HTTP_MAX_HEADERS):
+            line = (await reader.readline()).decode("latin-1")
+            if not line.strip():
+                break
+            name, _, value = line.partition(":")
+            headers[name.strip().lower()] = value.strip()
+        if self.token is not None:
+            scheme, _, given = headers.get("authorization", "").partition(" ")
+            ok = hmac.compare_digest(given.strip().encode("latin-1"), self.token)
+            if scheme.lower() != "bearer" or not ok:
+                return (
+                    "401 Unauthorized",
+                    b'{"error": "a bearer token is required"}',
+                    ("WWW-Authenticate: Bearer\r\n"),
+                )
+        if len(parts) >= 2 and parts[0] == "GET" and parts[1] == "/estimate":
+            return "200 OK", to_json(self.core.snapshot()).encode(), ""
+        return "404 Not Found", b'{"error": "only GET /estimate"}', ""
 
 
 def read_trace(path: str | Path) -> dict[str, np.ndarray]:
-    """A trace as arrays: ``t`` (K,), ``xhat`` (K, n_x), ``ybar`` (K, n_y), ``transmissions`` (K, N)."""
+    """A trace as arrays: ``t`` (K,), ``xhat`` (K, n_x), ``ybar`` (K, n_y), ``transmissions`` (K, N).
+
+    ``null`` entries (an output not yet received, an estimate that stopped being finite)
+    are NaN.
+    """
     rows = [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+
+    def floats(key: str) -> np.ndarray:
+        return np.array([[np.nan if v is None else v for v in r[key]] for r in rows], dtype=float)
+
     return {
         "t": np.array([r["t"] for r in rows]),
-        "xhat": np.array([r["xhat"] for r in rows], dtype=float),
-        "ybar": np.array([[np.nan if v is None else v for v in r["ybar"]] for r in rows], dtype=float),
+        "xhat": floats("xhat"),
+        "ybar": floats("ybar"),
         "transmissions": np.array([r["transmissions"] for r in rows], dtype=np.int64),
     }

@@ -1,26 +1,40 @@
 """The observer service's state machine: packets in, estimate out (no I/O here).
 
 :class:`ObserverCore` holds the observer state ``z``, the held outputs ``ybar`` and, per
-node, the last sequence number applied and a window of recent ones. It integrates
-``z' = f_o(t, z, u, ybar, yhat)`` (eq. (7)) with classical Runge--Kutta steps of at most
-``dt`` between events. A packet is checked (:func:`~etobs.runtime.packet.decode`), then:
+node, the last sequence number accepted, a window of recent ones and a count of the
+sequence numbers it never saw. It integrates ``z' = f_o(t, z, u, ybar, yhat)`` (eq. (7))
+with classical Runge--Kutta steps of at most ``dt`` between events. A packet is checked
+(:func:`~etobs.runtime.packet.decode`: ``malformed``, ``forged``), then, in this order:
 
+* ``wrong_session`` if it is authentic but carries another session (epoch) than the
+  service's: a packet of an earlier run, or a sensor given the wrong ``--epoch``;
+* ``wrong_size`` if it carries another number of values than the node has outputs;
+* ``out_of_range`` if a value is non-finite or larger than ``max_value`` in magnitude,
+  or the sample time is non-finite or beyond ``MAX_TIME``;
 * ``replayed`` if its sequence number was already accepted (a copy);
-* ``stale`` if it is older than the last one accepted (overtaken);
+* ``stale`` if it is older than the last one accepted (overtaken, or a replay older than
+  the window of recent numbers or than a restart);
+* ``seq_jump`` if it is more than ``MAX_SEQ_JUMP`` above the last one accepted (a node
+  never skips that many: accepting it would refuse the node's next packets as stale);
 * ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
   (a wrong clock or epoch; accepting it would stall the observer);
-* otherwise accepted. A packet whose sample time is still ahead of the observer waits
-  in a queue and is applied when the observer reaches that time, in time order across
-  nodes (so it acts from when it was measured); one that arrives after the observer
-  passed its time is applied at once and counted in ``late``.
+* otherwise accepted (``initial`` or ``applied``). It waits in a queue and is applied
+  when the observer reaches its sample time, in time order across nodes (so it acts from
+  when it was measured); one whose time the observer has passed is applied at the next
+  :meth:`ObserverCore.advance` and counted in ``late``.
 
-Every rejection is counted by kind; nothing raises. The asyncio transports
+Before queued packets are applied, the high-water marks are written to their file
+(:class:`~etobs.runtime.marks.HighWaterMarks`), so a packet that acted on the estimate is
+refused after any restart. Every rejection is counted by kind; nothing raises. If the
+observer's state stops being finite (an unstable observer, a too-large ``dt``), it stays
+at its last finite value and ``status`` says ``nonfinite``. The asyncio transports
 (:mod:`etobs.runtime.server`) feed it.
 """
 
 from __future__ import annotations
 
 import heapq
+import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -30,9 +44,27 @@ import numpy as np
 
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
-from etobs.runtime.packet import Packet, PacketError, decode
+from etobs.runtime.marks import HighWaterMarks
+from etobs.runtime.packet import Packet, PacketError, decode, key_id
 
-VERDICTS = ("applied", "initial", "replayed", "stale", "future", "malformed", "forged", "wrong_size")
+VERDICTS = (
+    "applied",
+    "initial",
+    "replayed",
+    "stale",
+    "seq_jump",
+    "future",
+    "wrong_session",
+    "out_of_range",
+    "malformed",
+    "forged",
+    "wrong_size",
+)
+#: A node's sequence numbers never jump by more: a restart skips at most one reserved block
+#: (1024 by default), so 2^32 is four million restarts between two packets the service saw.
+MAX_SEQ_JUMP = 2**32
+#: Sample times beyond this many seconds (31,700 years) are no clock's.
+MAX_TIME = 1e12
 
 
 @dataclass
@@ -40,9 +72,11 @@ class NodeState:
     """What the observer knows of one node."""
 
     outputs: np.ndarray
+    key_id: str
     last_seq: int = 0
     recent: deque[int] = field(default_factory=lambda: deque(maxlen=256))
     transmissions: int = 0
+    gaps: int = 0
 
 
 class ObserverCore:
@@ -63,6 +97,12 @@ class ObserverCore:
     max_lead : float
         Packets stamped more than this ahead of the clock given to :meth:`receive` are
         rejected as ``future``.
+    session : float
+        The session packets must carry (the deployment's epoch; the server sets it).
+    marks : HighWaterMarks, optional
+        Where the high-water marks are kept across restarts (default: in memory only).
+    max_value : float
+        Values larger than this in magnitude are refused as ``out_of_range``.
 
     """
 
@@ -75,6 +115,9 @@ class ObserverCore:
         t0: float = 0.0,
         dt: float = 1e-3,
         max_lead: float = 1.0,
+        session: float = 0.0,
+        marks: HighWaterMarks | None = None,
+        max_value: float = 1e12,
     ) -> None:
         if not isinstance(problem, EstimationProblem):
             raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
@@ -82,8 +125,9 @@ class ObserverCore:
             raise InputError(
                 "the observer service runs the base setting: no input nodes, hold='output', no network"
             )
-        if dt <= 0:
-            raise InputError(f"`dt` must be > 0; got {dt}")
+        for name, value in (("dt", dt), ("max_value", max_value), ("max_lead", max_lead)):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
         missing = [i for i in range(problem.n_nodes) if i not in keys]
         if missing:
             raise InputError(f"`keys` has no key for nodes {missing}")
@@ -92,12 +136,22 @@ class ObserverCore:
         self.z = np.zeros(n_z) if z0 is None else np.asarray(z0, dtype=float).reshape(n_z)
         self.t = float(t0)
         self.ybar = np.full(problem.plant.n_y, np.nan)
-        self.nodes = {i: NodeState(outputs=np.array(nd.outputs)) for i, nd in enumerate(problem.nodes)}
+        self.nodes = {
+            i: NodeState(outputs=np.array(nd.outputs), key_id=key_id(self.keys[i]))
+            for i, nd in enumerate(problem.nodes)
+        }
+        self.marks = marks
+        if marks is not None:
+            for i, seq in marks.load({i: nd.key_id for i, nd in self.nodes.items()}).items():
+                if i in self.nodes:
+                    self.nodes[i].last_seq = seq
+        self._dirty = False  # marks accepted but not yet written
         self.counts = dict.fromkeys(VERDICTS, 0)
-        self.max_lead = float(max_lead)
+        self.max_lead, self.max_value, self.session = float(max_lead), float(max_value), float(session)
         self._queue: list[tuple[float, int, int, Packet]] = []  # (t, node, seq, packet)
         self.late = 0
         self.max_lateness = 0.0
+        self.status = "ok"
 
     @property
     def ready(self) -> bool:
@@ -106,7 +160,8 @@ class ObserverCore:
 
     def xhat(self) -> np.ndarray:
         """The estimate ``psi(z)``."""
-        return np.asarray(self.problem.observer.call_psi(self.z, self.problem.plant.n_x), dtype=float)
+        with np.errstate(all="ignore"):
+            return np.asarray(self.problem.observer.call_psi(self.z, self.problem.plant.n_x), dtype=float)
 
     def _f(self, t: float, z: np.ndarray) -> np.ndarray:
         """``f_o(t, z, u(t), ybar, h(psi(z)))`` of the one run the service observes."""
@@ -116,9 +171,21 @@ class ObserverCore:
         return np.asarray(pb.observer.call_f_o(t, z, u, self.ybar.copy(), yhat), dtype=float)
 
     def advance(self, t: float) -> None:
-        """Integrate the observer to time ``t``, applying the queued packets on the way."""
+        """Integrate the observer to time ``t``, applying the queued packets on the way.
+
+        The high-water marks of every packet accepted so far are written first, so no
+        packet acts on the estimate before its sequence number is on record.
+        """
+        if not math.isfinite(t):
+            raise InputError(f"`t` must be a finite time; got {t!r}")
+        if self._dirty and self.marks is not None:
+            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()})
+        self._dirty = False
         while self._queue and self._queue[0][0] <= t:
             tk, _, _, p = heapq.heappop(self._queue)
+            if tk < self.t:  # arrived after the observer passed its time: acts from now
+                self.late += 1
+                self.max_lateness = max(self.max_lateness, self.t - tk)
             self._integrate(tk)
             self._hold(p)
         self._integrate(t)
@@ -126,20 +193,29 @@ class ObserverCore:
     def _integrate(self, t: float) -> None:
         if t <= self.t:
             return
-        if not self.ready:  # nothing to run on yet: the observer waits at its initial state
+        if not self.ready or self.status != "ok":  # nothing (sound) to run on: the state waits
             self.t = t
             return
-        n = max(1, int(np.ceil((t - self.t) / self.dt - 1e-9)))
+        n = max(1, math.ceil((t - self.t) / self.dt - 1e-9))
         h = (t - self.t) / n
         z = self.z
-        for k in range(n):
-            s = self.t + k * h
-            k1 = self._f(s, z)
-            k2 = self._f(s + h / 2, z + h / 2 * k1)
-            k3 = self._f(s + h / 2, z + h / 2 * k2)
-            k4 = self._f(s + h, z + h * k3)
-            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        with np.errstate(all="ignore"):  # an overflow is a status below, not a warning
+            for k in range(n):
+                s = self.t + k * h
+                k1 = self._f(s, z)
+                k2 = self._f(s + h / 2, z + h / 2 * k1)
+                k3 = self._f(s + h / 2, z + h / 2 * k2)
+                k4 = self._f(s + h, z + h * k3)
+                step = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                if not np.all(np.isfinite(step)) or not np.all(np.isfinite(self._psi(step))):
+                    self.status = "nonfinite"  # keep the last finite state; say so
+                    self.z, self.t = z, t
+                    return
+                z = step
         self.z, self.t = z, t
+
+    def _psi(self, z: np.ndarray) -> np.ndarray:
+        return np.asarray(self.problem.observer.call_psi(z, self.problem.plant.n_x), dtype=float)
 
     def receive(self, data: bytes, now: float | None = None) -> str:
         """Check and accept one datagram; return the verdict (one of :data:`VERDICTS`).
@@ -153,25 +229,30 @@ class ObserverCore:
         node = self.nodes.get(p.node)
         if node is None:  # a key exists but the problem has no such node
             return self._count("forged")
+        if p.session != self.session:
+            return self._count("wrong_session")
         if len(p.values) != node.outputs.size:
             return self._count("wrong_size")
+        if not all(math.isfinite(v) and abs(v) <= self.max_value for v in p.values) or not (
+            math.isfinite(p.t) and abs(p.t) <= MAX_TIME
+        ):
+            return self._count("out_of_range")
         if p.seq in node.recent:
             return self._count("replayed")
         if p.seq <= node.last_seq:
             return self._count("stale")
+        if p.seq - node.last_seq > MAX_SEQ_JUMP:
+            return self._count("seq_jump")
         if now is not None and p.t > now + self.max_lead:
             return self._count("future")
+        if not p.initial and node.last_seq > 0:  # a restarted node skips numbers and says so
+            node.gaps += p.seq - node.last_seq - 1
         node.last_seq = p.seq
         node.recent.append(p.seq)
+        self._dirty = True
         if not p.initial:
             node.transmissions += 1
-        if p.t > self.t:
-            heapq.heappush(self._queue, (p.t, p.node, p.seq, p))
-        else:
-            if p.t < self.t:
-                self.late += 1
-                self.max_lateness = max(self.max_lateness, self.t - p.t)
-            self._hold(p)
+        heapq.heappush(self._queue, (p.t, p.node, p.seq, p))
         return self._count("initial" if p.initial else "applied")
 
     def _hold(self, p: Packet) -> None:
@@ -182,13 +263,20 @@ class ObserverCore:
         return verdict
 
     def snapshot(self) -> dict[str, Any]:
-        """The estimate and counters, JSON-ready."""
+        """The estimate and counters, JSON-ready (finite numbers or ``null``, never NaN)."""
+        nodes = [self.nodes[i] for i in sorted(self.nodes)]
         return {
             "t": self.t,
-            "xhat": [float(v) for v in self.xhat()],
-            "ybar": [None if not np.isfinite(v) else float(v) for v in self.ybar],
-            "transmissions": [self.nodes[i].transmissions for i in sorted(self.nodes)],
-            "last_seq": [self.nodes[i].last_seq for i in sorted(self.nodes)],
+            "status": self.status,
+            "xhat": [_finite(v) for v in self.xhat()],
+            "ybar": [_finite(v) for v in self.ybar],
+            "transmissions": [nd.transmissions for nd in nodes],
+            "last_seq": [nd.last_seq for nd in nodes],
+            "gaps": [nd.gaps for nd in nodes],
             "counts": dict(self.counts),
             "late": self.late,
         }
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
