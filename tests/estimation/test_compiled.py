@@ -202,7 +202,10 @@ def test_robot_arm_engine_matches_scipy(noise):
     assert ours.solution.jumps.rule.tolist() == sci.solution.jumps.rule.tolist()
     np.testing.assert_allclose(ours.solution.jumps.t, sci.solution.jumps.t, rtol=0, atol=1e-8)
     np.testing.assert_allclose(ours.solution.grid.x, sci.solution.grid.x, rtol=0, atol=1e-6)
-    if noise:  # the paper's first simulation: 52 and 55 transmissions (docs/robot-arm.md)
+    if noise:
+        # x0 = X0_PAPER with noise and disturbance (the paper's first simulation, which does not
+        # report its counts): 52 / 55 transmissions on [0, 30] is etobs's own reference value,
+        # from the scipy reference at rtol = atol = 1e-12 (`sci` above), in docs/robot-arm.md
         assert transmission_counts(ours, (0, 30))[0].tolist() == [52, 55]
 
 
