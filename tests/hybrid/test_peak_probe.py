@@ -75,3 +75,21 @@ def test_the_excursions_lie_between_step_ends(backend):
     assert len(sign_only.jumps) == 0
     steps = np.diff(sign_only.arcs[0].t)
     assert steps.max() > 10 * 2 * W  # steps much longer than a window
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="open (issue 14): the probe fits a parabola only at an interior maximum of the samples, "
+    "so a peak in the first or last 1/(2 event_samples) of a step is missed, on both solvers",
+)
+def test_every_excursion_is_found_whatever_its_phase_in_the_step(backend):
+    # guards against: short excursions missed near a step's ends (where no interior sample is the maximum)
+    # 46 phases of the same windows, s(0) = -0.9 .. 0: before the fix 1 to 4 runs per
+    # solver and tolerance lost their remaining events (a window at theta = 0.94..0.98 of
+    # a step; once one is missed, k stops and so do the later ones)
+    s0 = -np.linspace(0.0, 0.9, 46)
+    x0 = np.stack([s0, np.zeros_like(s0)], axis=1)
+    expected = [int(np.sum(P * np.arange(1, 20) - W - s < T_END)) for s in s0]
+    sol = solve(windows(), x0, (0.0, T_END), backend=backend)
+    missed = [b for b in range(len(s0)) if sol.j_final[b] != expected[b]]
+    assert not missed, f"runs {missed} (s(0) = {s0[missed].tolist()}) lost excursions"
