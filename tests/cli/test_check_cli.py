@@ -61,7 +61,7 @@ def test_check_rejects_bad_specs(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["check", str(tmp_path / "missing.toml")])
     assert exc.value.code == 2
-    assert "SPEC must be a TOML file or one of robot_arm; got" in capsys.readouterr().err
+    assert "missing.toml' does not exist (SPEC is a TOML file or one of robot_arm)" in capsys.readouterr().err
 
 
 def test_an_unsolvable_design_is_bad_input_not_a_failed_condition(tmp_path, capsys):

@@ -68,7 +68,9 @@ def load_toml(name: str, packaged: dict[str, str], package: str) -> dict[str, An
         data = resources.files(package).joinpath("data", packaged[name]).read_bytes()
         return parse_toml(data, name)
     if not Path(name).exists():
-        raise SpecError(f"SPEC must be a TOML file or one of {', '.join(packaged)}; got {name!r}")
+        raise SpecError(
+            f"spec file {name!r} does not exist (SPEC is a TOML file or one of {', '.join(packaged)})"
+        )
     return read_toml(name)
 
 

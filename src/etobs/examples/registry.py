@@ -25,7 +25,7 @@ from types import ModuleType
 from typing import Any
 
 from etobs._spec import SpecError, is_factory
-from etobs.errors import InputError
+from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.robot_arm import robot_arm, robot_arm_network
 
@@ -102,7 +102,7 @@ def make_problem(factory: str, kwargs: dict[str, Any], where: str) -> Estimation
     fn = resolve_factory(factory)
     try:
         problem = fn(**kwargs)
-    except InputError as exc:  # the factory checked its arguments: say which spec table they came from
+    except EtobsError as exc:  # the factory checked its arguments: say which spec table they came from
         raise SpecError(f"{where}: {exc}") from exc
     except Exception as exc:
         raise SpecError(

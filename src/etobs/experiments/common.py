@@ -40,7 +40,7 @@ from etobs._spec import SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
-from etobs.errors import InputError
+from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.options import SolverOptions
 from etobs.hybrid.solver import check_backend
@@ -283,7 +283,7 @@ def parse_backend(value: Any) -> str:
     """Validate ``execution.backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
     try:
         return check_backend(value, "execution.backend")
-    except InputError as exc:
+    except EtobsError as exc:
         raise SpecError(str(exc)) from None
 
 
@@ -324,6 +324,6 @@ def parse_solver(table: Any) -> dict[str, Any]:
     solver = _keys("solver", table, set(), _SOLVER_KEYS)
     try:
         SolverOptions(**solver)
-    except InputError as exc:
+    except EtobsError as exc:
         raise SpecError(f"`solver`: {exc}") from exc
     return dict(solver)

@@ -61,7 +61,7 @@ from etobs._spec import SpecError, check_tree
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
-from etobs.errors import InputError
+from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
 from etobs.experiments.common import COMMON_KEYS, Experiment, normalize, parse_common
 from etobs.experiments.systems import build
@@ -139,7 +139,7 @@ class RuleEntry:
             return send_on_delta(p["delta"])
         except SpecError:
             raise
-        except InputError as exc:
+        except EtobsError as exc:
             raise SpecError(f"`rules[{self.name!r}]`, node {node}: {exc}") from exc
         except (KeyError, TypeError) as exc:
             raise SpecError(f"`rules[{self.name!r}]`: missing or wrong parameter ({exc})") from exc
@@ -312,7 +312,7 @@ def _network(where: str, table: Any) -> NetworkEntry:
         )
     except SpecError:
         raise
-    except InputError as exc:
+    except EtobsError as exc:
         raise SpecError(f"`{where}`: {exc}") from exc
     seed = int(_number(f"{where}.seed", t.get("seed", 0), lower=0, integer=True))
     return NetworkEntry(name, Network(link, seed=seed))

@@ -1,0 +1,211 @@
+"""Every CLI mistake is one line on stderr naming the file, key or argument, and exit 2.
+
+The audit of issue 14 found 23 tracebacks for ordinary mistakes (a non-UTF-8 spec, a
+directory as spec, integers beyond float range, deep nesting, unknown factory
+parameters, ...), ``etobs sweep /dev/zero`` reading until memory ran out, and
+``factory = "subprocess:run"`` running a command. Each spec mistake is tried here on
+every command that reads a spec (``sweep``, ``compare``, ``check``, ``serve`` and
+``sensor``, all through :func:`etobs.cli.main.main`), and the argument mistakes on every
+command.
+"""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from etobs._spec import MAX_DEPTH, MAX_SPEC_BYTES
+from etobs.cli.main import main
+
+LINEAR = '"tests.estimation.linear:factory"'
+
+
+def sweep_spec(factory=LINEAR, params="{}", number="1.0", top=""):
+    return (
+        f'{top}name = "bad"\n[system]\nfactory = {factory}\nfixed = {params}\n'
+        "[initial_states]\nlow = [-1.0, -1.0]\nhigh = [1.0, 1.0]\nruns = 1\nseed = 0\n"
+        f"[horizon]\nt_end = {number}\n"
+    )
+
+
+def compare_spec(factory=LINEAR, params="{}", number="1.0", top=""):
+    return (
+        f'{top}name = "bad"\n[system]\nfactory = {factory}\nparams = {params}\n'
+        "[initial_states]\nlow = [-1.0, -1.0]\nhigh = [1.0, 1.0]\nruns = 1\nseed = 0\n"
+        f'[horizon]\nt_end = {number}\n[[rules]]\nname = "base"\nkind = "base"\n'
+    )
+
+
+def check_spec(factory=LINEAR, params="{}", number="0.0", top=""):
+    return f"{top}[system]\nfactory = {factory}\nparams = {params}\n[guarantees]\ndisturbance = {number}\n"
+
+
+def deployment_spec(factory=LINEAR, params="{}", number="1.0", top=""):
+    return (
+        f'{top}name = "bad"\n[system]\nfactory = {factory}\nparams = {params}\n'
+        f'[runtime]\nperiod = 0.01\nduration = {number}\nport = 0\nsecret_file = "secret.key"\n'
+        "[plant]\nx0 = [1.0, 0.0]\n"
+    )
+
+
+#: Each command that reads a spec: its spec writer, extra arguments, the numeric key.
+COMMANDS = {
+    "sweep": (sweep_spec, ["--executor", "serial"], "horizon.t_end"),
+    "compare": (compare_spec, ["--executor", "serial", "--no-plot"], "horizon.t_end"),
+    "check": (check_spec, [], "guarantees.disturbance"),
+    "serve": (deployment_spec, ["--epoch", "1000.0"], "runtime.duration"),
+    "sensor": (deployment_spec, ["--node", "0", "--epoch", "1000.0"], "runtime.duration"),
+}
+
+NESTED = "[" * (MAX_DEPTH + 4) + "1.0" + "]" * (MAX_DEPTH + 4)
+#: (case, how to write the spec file from the command's writer, what the line must say).
+SPEC_CASES = [
+    ("missing", None, r"does not exist"),
+    ("directory", "DIR", r"is a directory; expected a TOML file"),
+    ("not UTF-8", lambda w: w().encode() + b'colour = "\xff\xfe"\n', r"is not UTF-8 text: byte \d+ is 0xff"),
+    ("over 1 MiB", lambda w: w() + "#" * MAX_SPEC_BYTES + "\n", r"is larger than 1048576 bytes \(1 MiB\)"),
+    ("not TOML", lambda w: w() + "[system\n", r"is not valid TOML"),
+    (
+        "nested past the recursion limit",
+        lambda w: w(number="[" * 5000 + "]" * 5000),
+        r"deeper than 16 levels",
+    ),
+    (
+        "nested past the limit",
+        lambda w: w(number=NESTED),
+        r"`{key}\[0\](\[0\])*` .* is nested 17 levels deep",
+    ),
+    ("5000-digit integer", lambda w: w(number="9" * 5000), r"holds a value Python cannot read"),
+    ("400-digit integer", lambda w: w(number="9" * 400), r"`{key}` must lie within \+-1.8e308"),
+    ("400-digit factory argument", lambda w: w(params="{ sigma = " + "9" * 400 + " }"), r"params|fixed"),
+    ("1e400", lambda w: w(number="1e400"), r"`{key}` must be finite; got inf"),
+    ("nan", lambda w: w(number="nan"), r"`{key}` must be finite; got nan"),
+    ("a date", lambda w: w(number="1979-05-27"), r"`{key}` .*got a date or time"),
+    ("a string for a number", lambda w: w(number='"1.0"'), r"`{key}` must be a number; got '1.0'"),
+    ("a key with a line break", lambda w: w(top='"a\\nb" = 1\n'), r"unknown key `spec.a\\nb`"),
+    ("a factory that is not a string", lambda w: w(factory="3"), r"`system.factory` must be a string"),
+    ("an unknown factory", lambda w: w(factory='"pendulum"'), r"`system.factory` = 'pendulum' is neither"),
+    (
+        "an unknown factory parameter",
+        lambda w: w(params="{ colour = 1 }"),
+        r"parameter `colour` \(.*\) is not an argument of the factory 'tests.estimation.linear:factory'",
+    ),
+    (
+        "a factory argument of the wrong type",
+        lambda w: w(params='{ sigma = "big" }'),
+        r"`sigma` must be a real number; got 'big'",
+    ),
+]
+#: A sweep calls its factory in the workers: there a wrong value fails the chunk (exit 1).
+IN_THE_WORKERS = {("sweep", "a factory argument of the wrong type")}
+
+
+def run(argv, capsys):
+    """Exit status and the stderr lines of ``etobs ARGV`` run in this process."""
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    err = capsys.readouterr().err
+    return info.value.code, [line for line in err.splitlines() if line.strip()]
+
+
+def one_clear_line(code, lines):
+    assert code == 2, lines
+    assert len(lines) == 1, lines
+    assert "Traceback" not in lines[0]
+    assert re.match(r"etobs( [a-z0-9-]+)*: error: ", lines[0]), lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+@pytest.mark.parametrize(("case", "write", "says"), SPEC_CASES, ids=[c[0] for c in SPEC_CASES])
+def test_every_spec_mistake_is_one_line_naming_the_file(command, case, write, says, tmp_path, capsys):
+    if (command, case) in IN_THE_WORKERS:
+        return  # test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it
+    writer, extra, key = COMMANDS[command]
+    spec = tmp_path / "spec.toml"
+    if write == "DIR":
+        spec.mkdir()
+    elif write is not None:
+        content = write(writer)
+        spec.write_bytes(content if isinstance(content, bytes) else content.encode())
+    line = one_clear_line(*run([command, str(spec), *extra], capsys))
+    assert str(spec) in line
+    assert re.search(says.format(key=re.escape(key)), line), line
+
+
+def test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it(tmp_path, capsys):
+    spec = tmp_path / "spec.toml"
+    spec.write_text(sweep_spec(params='{ sigma = "big" }'))
+    code = main(["sweep", str(spec), "--out", str(tmp_path / "out"), "--executor", "serial"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert re.search(r"failed: runs 0..0 .*SpecError: row 0, scenario 'default': `sigma` must be a real", err)
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_an_endless_spec_file_is_read_in_bounded_memory(command, capsys):
+    # it read until memory ran out (2.6 GB when a 3 GB limit stopped it)
+    _, extra, _ = COMMANDS[command]
+    line = one_clear_line(*run([command, "/dev/zero", *extra], capsys))
+    assert "spec file '/dev/zero' is larger than 1048576 bytes" in line
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_a_spec_cannot_run_a_command(command, tmp_path, capsys):
+    # factory = "subprocess:run" ran the shell command in sweep, compare, check and serve
+    marker = tmp_path / "ran"
+    writer, extra, _ = COMMANDS[command]
+    spec = tmp_path / "spec.toml"
+    spec.write_text(writer(factory='"subprocess:run"', params=f'{{ args = ["touch", "{marker}"] }}'))
+    line = one_clear_line(*run([command, str(spec), *extra], capsys))
+    assert not marker.exists()
+    assert f"{spec}: `system.factory` = 'subprocess:run' is not marked as a factory" in line
+    assert "mark it with @etobs.factory" in line and "docs/specs.md" in line
+
+
+#: (argv, what the line must say) for mistakes in the arguments of every command.
+ARGUMENT_CASES = [
+    (["sweep"], r"etobs sweep: error: the following arguments are required: spec"),
+    (["sweep", "SPEC", "--runs", "0"], r"argument --runs: must be a positive integer; got '0'"),
+    (["sweep", "SPEC", "--executor", "gpu"], r"argument --executor: invalid choice: 'gpu'"),
+    (["sweep", "SPEC", "--out", "SPEC"], r"argument --out: must be a folder; '.*spec.toml' is a file"),
+    (["sweep", "SPEC", "--backend", "gpu"], r"argument --backend: `--backend` must be one of"),
+    (["reproduce", "table1", "--chunk-size", "-3"], r"argument --chunk-size: must be a positive integer"),
+    (["compare", "SPEC", "--workers", "many"], r"argument --workers: must be a positive integer; got 'many'"),
+    (["compare", "SPEC", "--out", "SPEC"], r"argument --out: must be a folder"),
+    (["check"], r"etobs check: error: the following arguments are required: SPEC"),
+    (["check", "SPEC", "--colour"], r"unrecognized arguments: --colour"),
+    (["sensor", "SPEC", "--epoch", "1.0"], r"the following arguments are required: --node"),
+    (["sensor", "SPEC", "--node", "first", "--epoch", "1.0"], r"argument --node: invalid int value: 'first'"),
+    (["demo", "robot-arm", "--t-end", "nan"], r"argument --t-end: must be a finite number > 0; got 'nan'"),
+    (["demo", "robot-arm", "--t-end", "-1"], r"argument --t-end: must be a finite number > 0; got '-1'"),
+    (["demo", "robot-arm", "--rtol", "0"], r"argument --rtol: must be a finite number > 0; got '0'"),
+    (["demo", "robot-arm", "--x0", "1,2"], r"argument --x0: --x0 must be 4 comma-separated finite numbers"),
+    (["demo", "robot-arm", "--window", "a,b"], r"argument --window: --window must be 2 comma-separated"),
+    (["demo", "robot-arm", "--out", "SPEC"], r"argument --out: must be a folder"),
+    (["demo", "pendulum"], r"argument CASE: invalid choice: 'pendulum'"),
+    (["colour"], r"argument COMMAND: invalid choice: 'colour'"),
+]
+
+
+@pytest.mark.parametrize(("argv", "says"), ARGUMENT_CASES, ids=[" ".join(a) for a, _ in ARGUMENT_CASES])
+def test_every_argument_mistake_is_one_line_naming_the_argument(argv, says, tmp_path, capsys):
+    spec = tmp_path / "spec.toml"
+    spec.write_text(sweep_spec())
+    line = one_clear_line(*run([str(spec) if a == "SPEC" else a for a in argv], capsys))
+    assert re.search(says, line), line
+    assert line.endswith("--help)")  # the usage is one --help away, not printed
+
+
+def test_the_installed_command_prints_one_line_and_no_traceback(tmp_path):
+    spec = tmp_path / "spec.toml"
+    spec.write_bytes(b'name = "\xff"\n')
+    out = subprocess.run(
+        [sys.executable, "-m", "etobs", "sweep", str(spec)], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 2
+    assert out.stderr == f"etobs: error: spec file '{spec}' is not UTF-8 text: byte 8 is 0xff\n"
