@@ -4,6 +4,10 @@ A one-run function may return a 1-D array or a tuple of floats; a tuple costs no
 allocation (numba keeps it in registers), which matters for a function called hundreds
 of thousands of times per run. :func:`store` copies either into ``out`` and returns
 ``OK`` (1) or ``BAD_SHAPE`` (2) when the length is not ``n``.
+
+:func:`readonly` is how a user function sees its inputs: numba then refuses, when it
+compiles the function, any write into them (a write changed the solver's state behind
+its back: a stage of the step, the state before a jump).
 """
 
 from __future__ import annotations
@@ -11,7 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 from numba.core import types
-from numba.extending import overload
+from numba.core.imputils import impl_ret_borrowed
+from numba.extending import intrinsic, overload
 
 
 def store(r: Any, out: Any, n: int) -> int:
@@ -43,3 +48,16 @@ def _store(r: Any, out: Any, n: Any) -> Any:
 
         return from_tuple
     return None
+
+
+@intrinsic
+def readonly(typingctx: Any, arr: Any):  # type: ignore[no-untyped-def]
+    """The same array typed read-only (no copy): numba refuses code that writes into it."""
+    if not isinstance(arr, types.Array):
+        return None
+    sig = arr.copy(readonly=True)(arr)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return impl_ret_borrowed(context, builder, signature.return_type, args[0])
+
+    return sig, codegen

@@ -13,7 +13,8 @@ tuple of floats (no allocation: the fastest form for functions called very often
 * ``RAISED`` (0): the function raised (numba prints the exception; the C wrapper
   returns zero);
 * ``BEYOND_N_FLOW`` (3): set by the engine, not the wrapper: a system's flow moved an
-  entry that its ``n_flow`` says is constant along flows.
+  entry that its ``n_flow`` says is constant along flows;
+* ``NAN_RESULT`` (4): set by the engine: an event function (the guard) returned NaN.
 
 The machine code is cached on disk under a hash of the function's content (see
 :mod:`etobs.compile.cache`): a new process, a sweep worker, or a function named as
@@ -31,7 +32,7 @@ from typing import Any
 from etobs.compile.fingerprint import _names, fingerprint
 from etobs.errors import ModelError
 
-RAISED, OK, BAD_SHAPE, BEYOND_N_FLOW = 0, 1, 2, 3
+RAISED, OK, BAD_SHAPE, BEYOND_N_FLOW, NAN_RESULT = 0, 1, 2, 3, 4
 #: Failure codes as words, for messages.
 FAILURES = {
     RAISED: "raised an exception (numba printed it above)",
@@ -39,6 +40,7 @@ FAILURES = {
     BEYOND_N_FLOW: (
         "returned a nonzero derivative for an entry from n_flow on (those must be constant along flows)"
     ),
+    NAN_RESULT: "returned NaN (an event function that is NaN never fires, so its jump would be missed)",
 }
 
 
@@ -76,11 +78,12 @@ class FunctionSpec:
     def source(self) -> str:
         """Text of the C wrapper (module docstring); the user function is ``USER``."""
         lines = ["def wrapper(k, t, a0, a1, a2, a3, ia, pp, outp):"]
+        # the inputs are read-only: numba refuses a function that writes into them
         for i, n in enumerate(self.sizes):
-            lines.append(f"    A{i} = carray(a{i}, ({n},))")
+            lines.append(f"    A{i} = readonly(carray(a{i}, ({n},)))")
         call = self.call
         if self.n_params:
-            lines.append(f"    P = carray(pp, ({self.n_params},))")
+            lines.append(f"    P = readonly(carray(pp, ({self.n_params},)))")
             call = f"{call}, P" if call else "P"
         lines.append(f"    r = USER({call})")
         if self.n_out == 0:
@@ -100,7 +103,7 @@ class CompiledFunction:
 
 
 #: Version of the cached wrappers' layout (part of the cache key).
-_FORMAT = 4
+_FORMAT = 5
 _MEMO: dict[str, CompiledFunction] = {}
 _MEMO_MODULES: dict[str, tuple[CompiledFunction, ...]] = {}
 _LOCK = threading.Lock()
@@ -135,7 +138,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
     """
     import numba
 
-    from etobs.compile._store import store
+    from etobs.compile._store import readonly, store
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
     source = spec.source()
@@ -150,6 +153,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
             "__name__": "etobs.compile._generated",
             "USER": _jitted(fn, {}),
             "carray": numba.carray,
+            "readonly": readonly,
             "store": store,
             KEY: key,
         }
@@ -157,10 +161,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
         try:
             cf = _load_or_compile(namespace["wrapper"], cached, f"`{name}`")
         except Exception as exc:  # numba raises many types; all mean "cannot compile"
-            raise ModelError(
-                f"`{name}` cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
-                "math on 1-D arrays (returning a 1-D array), or use backend='scipy', which runs any Python"
-            ) from exc
+            raise ModelError(_cannot_compile(name, exc)) from exc
         out = CompiledFunction(name, int(cf.address), cf)
         _MEMO[key] = out
         return out
@@ -172,8 +173,8 @@ def compile_module(
     """Compile the C functions ``entries`` of a generated module that calls user functions.
 
     ``text`` defines every name of ``entries`` as a function of :func:`c_signature`; it may
-    call ``carray``, ``store``, ``np`` and the user functions ``users`` by their global
-    names. Each user function is compiled on its own and cached under its fingerprint
+    call ``carray``, ``readonly``, ``store``, ``np`` and the user functions ``users`` by
+    their global names. Each user function is compiled on its own and cached under its fingerprint
     (so editing one recompiles only it and this module); the module links them. Memoized,
     and cached on disk by the text and the user functions' fingerprints.
 
@@ -187,7 +188,7 @@ def compile_module(
     import numba
     import numpy as np
 
-    from etobs.compile._store import store
+    from etobs.compile._store import readonly, store
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
     parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
@@ -202,6 +203,7 @@ def compile_module(
         namespace: dict[str, Any] = {
             "__name__": "etobs.compile._generated",
             "carray": numba.carray,
+            "readonly": readonly,
             "store": store,
             "np": np,
             KEY: key,
@@ -290,6 +292,26 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     out = numba.njit(error_model="numpy", cache=cached)(clone)
     memo[id(fn)] = out
     return out
+
+
+#: How both solvers word a function that writes into its (read-only) input.
+WRITES_INPUT = (
+    "writes into one of its input arrays, which are read-only (a write would change the solver's "
+    "state behind its back): work on a copy (x = x.copy()) or build a new array"
+)
+#: What numba says of a write into a read-only array.
+_READONLY_WRITE = ("readonly array", "Cannot modify readonly")
+
+
+def _cannot_compile(name: str, exc: Exception) -> str:
+    """Why the function ``name`` cannot be compiled, and the way out."""
+    text = str(exc)
+    if any(k in text for k in _READONLY_WRITE) and ("setitem" in text or "Cannot modify" in text):
+        return f"`{name}` {WRITES_INPUT}"
+    return (
+        f"`{name}` cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
+        "math on 1-D arrays (returning a 1-D array), or use backend='scipy', which runs any Python"
+    )
 
 
 def _reason(exc: Exception) -> str:

@@ -46,6 +46,7 @@ from etobs.compile.ccall import address, ccall, load_i64, store_i64
 from etobs.hybrid import _jitcache
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
+from etobs.hybrid.zeno import zeno_window as _zeno_window
 
 # Status codes as plain integers (numba folds them as constants).
 RUNNING = int(Status.RUNNING)
@@ -55,17 +56,20 @@ MAX_STEPS = int(Status.MAX_STEPS)
 NONFINITE = int(Status.NONFINITE)
 STEP_UNDERFLOW = int(Status.STEP_UNDERFLOW)
 MODEL_ERROR = int(Status.MODEL_ERROR)
+ZENO = int(Status.ZENO)
 
 MAX_ROOT_ITER = 200
 EPS = np.finfo(np.float64).eps
 
 # Indices into the float and integer option vectors.
-F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL = 0, 1, 2, 3, 4
-I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW = 0, 1, 2, 3, 4, 5
+F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL, F_ZENO_SPAN = 0, 1, 2, 3, 4, 5
+I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW, I_ZENO_JUMPS = 0, 1, 2, 3, 4, 5, 6
 #: Slots of the system's functions in failure codes.
 FLOW, GUARD, JUMP = 1, 2, 3
 #: The flow's failure code when it moves an entry that n_flow says is constant.
 FLOW_BEYOND_N_FLOW = 16 * FLOW + 3  # etobs.compile.functions.BEYOND_N_FLOW
+#: The guard's failure code when an event function is NaN (it would never fire).
+GUARD_NAN = 16 * GUARD + 4  # etobs.compile.functions.NAN_RESULT
 #: The ``k`` that flow and guard are called with (a jump gets its rule, >= 0), so that
 #: one C function may serve as all three (the estimation model does: one compile).
 K_FLOW, K_GUARD = -1, -2
@@ -182,6 +186,14 @@ def _any_nonneg(g):
 
 
 @numba.njit(inline="always", error_model="numpy")
+def _any_nan(g):
+    for k in range(g.shape[0]):
+        if np.isnan(g[k]):
+            return True
+    return False
+
+
+@numba.njit(inline="always", error_model="numpy")
 def _all_finite(x):
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
@@ -214,6 +226,9 @@ def _peak_probe(g0, gs, ns, S):
         return np.nan
     return best
 
+
+#: The Zeno rule's one definition (:mod:`etobs.hybrid.zeno`), compiled into the kernel.
+zeno_window = numba.njit(inline="always", error_model="numpy")(_zeno_window)
 
 _BODY = Path(__file__).with_name("_kernel_body.py")
 
@@ -257,7 +272,8 @@ def build(method: str) -> Any:
         # error_model="numpy": 1/0 gives inf (then a named status), never an exception
         {"jit": {"error_model": "numpy"}, "jit_nogil": {"nogil": True, "error_model": "numpy"}},
         depends=tuple(
-            here / f for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "../compile/ccall.py")
+            here / f
+            for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "zeno.py", "../compile/ccall.py")
         ),
         packages=("scipy",),
     )

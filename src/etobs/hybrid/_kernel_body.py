@@ -19,13 +19,16 @@ from etobs.hybrid._kernel import (
     F_MAX_STEP,
     F_RTOL,
     F_XTOL,
+    F_ZENO_SPAN,
     FLOW_BEYOND_N_FLOW,
+    GUARD_NAN,
     I_KEEP_STEPS,
     I_MAX_JUMPS,
     I_MAX_STEPS,
     I_N_FLOW,
     I_N_WORK,
     I_SAMPLES,
+    I_ZENO_JUMPS,
     MAX_FACTOR,
     MAX_JUMPS,
     MAX_ROOT_ITER,
@@ -36,7 +39,9 @@ from etobs.hybrid._kernel import (
     RUNNING,
     SAFETY,
     STEP_UNDERFLOW,
+    ZENO,
     _all_finite,
+    _any_nan,
     _any_nonneg,
     _dense_eval,
     _peak_probe,
@@ -52,6 +57,7 @@ from etobs.hybrid._kernel import (
     run_args,
     store_i64,
     vector_at,
+    zeno_window,
 )
 
 
@@ -137,7 +143,7 @@ def _kernel(
 def _scratch_size(n, m, S, n_p):
     """Floats of the solver's arrays for one run (see ``_solve_one``)."""
     n_s = max(S - 1, 0)
-    return (N_STAGES + 1 + N_EXTRA) * n + NQ * n + 6 * n + 4 * m + (n_s + 2) * (1 + m) + n_p + 1
+    return (N_STAGES + 1 + N_EXTRA) * n + NQ * n + 6 * n + 4 * m + (n_s + 2) * (1 + m) + n_p + 2 + 1
 
 
 @jit
@@ -219,6 +225,9 @@ def _solve_one(
     gs = rows_at(base, o, n_s + 2, m)
     o += (n_s + 2) * m
     p = vector_at(base, o, p_run.shape[0])
+    o += p_run.shape[0]
+    zw = vector_at(base, o, 2)  # the Zeno rule's window: its start and its jumps
+    o += 2
     # zeros: the flow and the dense output leave the entries nf.. of their rows unwritten
     everything = vector_at(base, 0, o)
     for i in range(o):
@@ -227,8 +236,10 @@ def _solve_one(
         x[i] = x_init[i]
     for i in range(p_run.shape[0]):
         p[i] = p_run[i]
+    zw[0] = -np.inf
+    zeno = (iopt[I_ZENO_JUMPS], fopt[F_ZENO_SPAN], zw)
     # what _jump_until_flow needs besides the changing (t, x, j, nlog, narc)
-    ctx = (args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers)
+    ctx = (args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers, zeno)
     t = t0
     j = 0
     st = RUNNING
@@ -424,15 +435,20 @@ def _grid_keep(grid_x, grid_j, dist, grid_max, run, gk, j, xs):
 def _jump_until_flow(ctx, t, x, j, nlog, narc):
     """Apply jumps until every event function is negative, then refresh ``f = flow(t, x)``.
 
-    Returns (status, j, nlog, narc); the status is ``completed`` at ``t_end`` and
-    ``nonfinite`` when the state or its derivative is not finite. ``ctx`` is the run's
-    fixed context (see ``_solve_one``); its ``buffers`` hold the jump log and arc arrays
-    ``(log_rule, log_t, log_j, arc_t, arc_j, arc_x)``.
+    Returns (status, j, nlog, narc); the status is ``completed`` at ``t_end``,
+    ``nonfinite`` when the state or its derivative is not finite, ``zeno`` when the
+    jumps pile up in time (:mod:`etobs.hybrid.zeno`) and ``model_error`` when an event
+    function is NaN (it would never fire). ``ctx`` is the run's fixed context (see
+    ``_solve_one``); its ``buffers`` hold the jump log and arc arrays ``(log_rule, log_t,
+    log_j, arc_t, arc_j, arc_x)``, its ``zeno`` the rule's limit, span and window.
     """
-    args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers = ctx
+    args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers, zeno = ctx
     log_rule, log_t, log_j = buffers[0], buffers[1], buffers[2]
+    zeno_jumps, zeno_span, zw = zeno
     while m > 0:
         guard_call(t, x, p, args, g)
+        if not failed(args) and _any_nan(g):
+            store_i64(args[6], GUARD_NAN)
         if failed(args):
             return MODEL_ERROR, j, nlog, narc
         if not _any_nonneg(g):
@@ -455,6 +471,11 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
                 narc = _record_arc(buffers, slot, arc_cap, narc, t, j, x)
             if not _all_finite(x):
                 return NONFINITE, j, nlog, narc
+            start, count = zeno_window(t, zw[0], int(zw[1]), zeno_span)
+            zw[0] = start
+            zw[1] = count
+            if count > zeno_jumps:
+                return ZENO, j, nlog, narc
     flow_call(t, x, p, args, f)
     if failed(args):
         return MODEL_ERROR, j, nlog, narc
@@ -590,6 +611,11 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
             _dense_eval(Q, nq, dop853, x0, probe, xs)
             guard_call(t0 + probe * h, xs, p, args, gp + 8 * m * pos)
             ns += 1
+    # a NaN event function never fires: the run must not go on as if it were negative
+    for i in range(ns):
+        if _any_nan(gs[i]):
+            store_i64(args[6], GUARD_NAN)
+            return np.nan
     # first sample with any g >= 0
     first = -1
     for i in range(ns):
@@ -636,6 +662,9 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
         _dense_eval(Q, nq, dop853, x0, x, xs)
         guard_call(t0 + x * h, xs, p, args, gtmp)
         fx = gtmp[k]
+        if np.isnan(fx):
+            store_i64(args[6], GUARD_NAN)
+            break
         if fx >= 0:
             if side == 1:
                 f_lo *= 0.5

@@ -34,6 +34,7 @@ from etobs.hybrid.system import _check_sizes
 LOG_CAPACITY = 4096
 ARC_CAPACITY = 8192
 _BUFFER_BUDGET = 2**22  # entries in all runs' buffers together, first pass
+_NEVER = 2**62  # a count no run reaches (SolverOptions(zeno_jumps=None))
 
 
 @dataclass(frozen=True)
@@ -303,7 +304,8 @@ def _call(
 
     n = x.shape[1]
     fopt = np.array(
-        [opts.rtol, opts.atol, opts.max_step, opts.first_step or 0.0, opts.event_xtol], dtype=float
+        [opts.rtol, opts.atol, opts.max_step, opts.first_step or 0.0, opts.event_xtol, opts.zeno_span],
+        dtype=float,
     )
     iopt = np.array(
         [
@@ -313,6 +315,7 @@ def _call(
             int(keep_steps),
             system.n_work + 1,
             system.n if system.n_flow is None else system.n_flow,
+            _NEVER if opts.zeno_jumps is None else opts.zeno_jumps,
         ],
         dtype=np.int64,
     )

@@ -11,6 +11,7 @@ from etobs import _validate as v
 from etobs.errors import InputError
 
 METHODS = ("dop853", "dopri5")
+_INT_LIMIT = 2**62
 
 
 @dataclass(frozen=True)
@@ -30,10 +31,19 @@ class SolverOptions:
     first_step : float or None
         Initial step size; ``None`` selects it automatically per run.
     max_jumps : int
-        Jump limit per run; a run reaching it stops with status ``max_jumps`` (guards
-        against Zeno behaviour).
+        Jump limit per run; a run reaching it stops with status ``max_jumps``.
     max_steps : int
-        Step limit per run (accepted and rejected steps).
+        Step limit per run (accepted and rejected steps on the engine; accepted steps
+        on the scipy reference, which counts them inside every flow segment); a run
+        reaching it stops with status ``max_steps``.
+    zeno_jumps : int or None
+        The Zeno rule (:mod:`etobs.hybrid.zeno`): a run whose jumps number more than
+        ``zeno_jumps`` within a time window of ``zeno_span * max(1, |t|)`` stops with
+        status ``zeno``. ``None`` turns the rule off (``max_jumps`` still bounds the run).
+    zeno_span : float
+        Width of the Zeno rule's window, relative to ``max(1, |t|)``. The default
+        (1000 jumps within ``1e-7`` s at ``|t| <= 1``) stops a run whose jumps come less
+        than ``1e-10`` s (a hundred times the default ``event_xtol``) apart on average.
     event_samples : int
         Number of sub-intervals of every step on which the event functions are sampled
         before root finding. A sign test at step ends alone (``event_samples=1``) misses
@@ -51,6 +61,8 @@ class SolverOptions:
     first_step: float | None = None
     max_jumps: int = 1_000_000
     max_steps: int = 10_000_000
+    zeno_jumps: int | None = 1000
+    zeno_span: float = 1e-7
     event_samples: int = 8
     event_xtol: float = 1e-12
 
@@ -62,8 +74,12 @@ class SolverOptions:
         v.real("max_step", self.max_step, lower=0.0, lower_open=True, allow_inf=True)
         if self.first_step is not None:
             v.real("first_step", self.first_step, lower=0.0, lower_open=True)
-        v.integer("max_jumps", self.max_jumps, lower=0)
-        v.integer("max_steps", self.max_steps, lower=1)
+        # the limits travel to the engine as int64
+        v.integer("max_jumps", self.max_jumps, lower=0, upper=_INT_LIMIT)
+        v.integer("max_steps", self.max_steps, lower=1, upper=_INT_LIMIT)
+        if self.zeno_jumps is not None:
+            v.integer("zeno_jumps", self.zeno_jumps, lower=1, upper=_INT_LIMIT)
+        v.real("zeno_span", self.zeno_span, lower=0.0)
         v.integer("event_samples", self.event_samples, lower=1)
         v.real("event_xtol", self.event_xtol, lower=0.0, lower_open=True)
 

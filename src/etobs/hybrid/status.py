@@ -19,6 +19,7 @@ class Status(enum.IntEnum):
     NONFINITE = 3
     STEP_UNDERFLOW = 4
     MODEL_ERROR = 5
+    ZENO = 6
 
     @property
     def label(self) -> str:
@@ -35,9 +36,10 @@ _MESSAGES = {
     Status.RUNNING: "the run has not finished",
     Status.COMPLETED: "the run reached the end of the horizon",
     Status.MAX_JUMPS: (
-        "the run reached the jump limit before the end of the horizon. This may be Zeno "
-        "behaviour (check that every eps > 0) or simply many transmissions: increase "
-        "`SolverOptions(max_jumps=...)`"
+        "the run reached its limit on the number of jumps before the end of the horizon: "
+        "many transmissions (a short period, a tiny eps, or a state that grows without bound) "
+        "rather than jumps piling up at one instant, which ends a run with `zeno`; increase "
+        "`SolverOptions(max_jumps=...)` if the jumps are expected"
     ),
     Status.MAX_STEPS: (
         "the run reached the step limit before the end of the horizon: loosen `rtol`/`atol`, "
@@ -54,6 +56,13 @@ _MESSAGES = {
     Status.MODEL_ERROR: (
         "a model function failed: it raised an exception or returned an array of the wrong "
         "shape; run the same problem with backend='scipy' to see the Python traceback"
+    ),
+    Status.ZENO: (
+        "the jumps piled up in time: more than `SolverOptions(zeno_jumps=...)` jumps within "
+        "`zeno_span * max(1, |t|)` seconds (Zeno behaviour, or jumps closer together than the "
+        "solver resolves in time). Check that every eps is > 0 and not tiny next to gamma(|e|) "
+        "(Theorem 3's minimum inter-event time is gamma_i^-1(eps_i) / E), that no rule stays "
+        "in its jump set after its own jump, or change `zeno_jumps`/`zeno_span`"
     ),
 }
 

@@ -168,6 +168,31 @@ class HybridSystem:
         )
 
 
+def read_only(a: Any) -> Any:
+    """A read-only view of an array (anything else as it is), for a user function's input.
+
+    A function that writes into its input would change the solver's state behind its
+    back (a stage of the step, the state saved before a jump): numpy then raises
+    ``ValueError: assignment destination is read-only``, and the run ends with
+    ``model_error`` naming the function. The engine refuses such a function when it
+    compiles it (:mod:`etobs.compile.functions`).
+    """
+    if not isinstance(a, np.ndarray):
+        return a
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+def raised(name: str, exc: Exception) -> str:
+    """How a failure names the Python function ``name`` that raised ``exc`` (both solvers' words)."""
+    from etobs.compile.functions import WRITES_INPUT
+
+    if isinstance(exc, ValueError) and "read-only" in str(exc):
+        return f"`{name}` {WRITES_INPUT}"
+    return f"`{name}` raised {type(exc).__name__}: {exc}"
+
+
 def _one(name: str, out: Any, n: int) -> np.ndarray:
     arr = np.asarray(out, dtype=float)
     if arr.shape != (n,):
