@@ -575,8 +575,14 @@ class _Code:
 
 
 def _call(fn: str, args: str, params: str | None, out: str, n: int, slot: int) -> list[str]:
-    """Call a user function and store its result into ``out`` (length ``n``), checking the length."""
-    call = f"{fn}({args}, {params})" if params else f"{fn}({args})"
+    """Call a user function and store its result into ``out`` (length ``n``), checking the length.
+
+    Its array arguments (every one but ``t``) are read-only: numba refuses a function
+    that writes into them, which would change the state or the signals behind the
+    solver's back.
+    """
+    given = [*args.split(", "), *([params] if params else [])]
+    call = f"{fn}({', '.join(a if a == 't' else f'readonly({a})' for a in given)})"
     return [
         f"st = store({call}, {out}, {n})",
         "if st != 1:",

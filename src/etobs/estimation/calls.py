@@ -56,13 +56,13 @@ class ModelCalls:
         if self.compiled:
             return self._run("f_p", t, x, u, v)
         pl = self.pb.plant
-        return _rows("f_p", pl.n_x, [pl.call_f_p(t[b], x[b], u[b], v[b]) for b in range(t.shape[0])])
+        return _rows("f_p", pl.n_x, pl.call_f_p, t, x, u, v)
 
     def h(self, x: np.ndarray) -> np.ndarray:
         if self.compiled:
             return self._run("h", np.zeros(x.shape[0]), x)
         pl = self.pb.plant
-        return _rows("h", pl.n_y, [pl.call_h(x[b]) for b in range(x.shape[0])])
+        return _rows("h", pl.n_y, lambda xb: pl.call_h(xb), x)
 
     def f_o(
         self, t: np.ndarray, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray
@@ -70,9 +70,7 @@ class ModelCalls:
         if self.compiled:
             return self._run("f_o", t, z, u, ybar, yhat)
         ob = self.pb.observer
-        return _rows(
-            "f_o", ob.n_z, [ob.call_f_o(t[b], z[b], u[b], ybar[b], yhat[b]) for b in range(t.shape[0])]
-        )
+        return _rows("f_o", ob.n_z, ob.call_f_o, t, z, u, ybar, yhat)
 
     def psi(self, z: np.ndarray) -> np.ndarray:
         n_x = self.pb.plant.n_x
@@ -81,7 +79,7 @@ class ModelCalls:
         if self.compiled:
             return self._run("psi", np.zeros(z.shape[0]), z)
         ob = self.pb.observer
-        return _rows("psi", n_x, [ob.call_psi(z[b], n_x) for b in range(z.shape[0])])
+        return _rows("psi", n_x, lambda zb: ob.call_psi(zb, n_x), z)
 
 
 def model_specs(problem: EstimationProblem) -> dict[str, tuple[Any, Any, np.ndarray]]:
@@ -100,10 +98,23 @@ def model_specs(problem: EstimationProblem) -> dict[str, tuple[Any, Any, np.ndar
     return specs
 
 
-def _rows(name: str, n: int, rows: list[Any]) -> np.ndarray:
-    out = np.empty((len(rows), n))
-    for b, r in enumerate(rows):
-        arr = np.asarray(r, dtype=float)
+def _rows(name: str, n: int, fn: Any, *batches: np.ndarray) -> np.ndarray:
+    """``fn`` called run by run on rows of ``batches`` (read-only), checked: shape ``(B, n)``.
+
+    Any failure, an exception or a result of another shape, is a ``ModelError`` naming
+    ``name``: the scipy reference ends that run with ``model_error``.
+    """
+    from etobs.hybrid.system import raised, read_only
+
+    B = batches[0].shape[0]
+    out = np.empty((B, n))
+    for b in range(B):
+        args = [read_only(a[b]) for a in batches]
+        try:
+            r = fn(*args)
+            arr = np.asarray(r, dtype=float)
+        except Exception as exc:  # the user's function: any failure ends the run the same way
+            raise ModelError(raised(name, exc)) from exc
         if arr.shape != (n,):
             raise ModelError(f"`{name}` returned shape {arr.shape}; expected ({n},) for one run")
         out[b] = arr

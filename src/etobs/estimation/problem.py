@@ -359,11 +359,25 @@ def _layout(
 
 
 def _check_shapes(pb: EstimationProblem) -> None:
-    """Call every model function once, for one run, and check what it returns."""
+    """Call every model function once, for one run, and check what it returns.
+
+    The inputs are read-only, as in the solvers: a function that writes into them is
+    refused here, naming it, on either backend.
+    """
+    from etobs.hybrid.system import raised, read_only
+
     p, o = pb.plant, pb.observer
     t0 = np.zeros(1)
-    x, z = np.zeros(p.n_x), np.zeros(o.n_z)
-    u, v = pb.u(t0)[0], pb.v(t0)[0]
+    x, z = read_only(np.zeros(p.n_x)), read_only(np.zeros(o.n_z))
+    u, v = read_only(pb.u(t0)[0]), read_only(pb.v(t0)[0])
+
+    def call(name: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except ValueError as exc:
+            if "read-only" not in str(exc):
+                raise
+            raise ModelError(raised(name, exc)) from exc
 
     def check(name: str, out: Any, n: int, what: str) -> np.ndarray:
         try:
@@ -379,10 +393,11 @@ def _check_shapes(pb: EstimationProblem) -> None:
             )
         return arr
 
-    check("f_p", p.call_f_p(0.0, x, u, v), p.n_x, "n_x")
-    y = check("h", p.call_h(x), p.n_y, "n_y")
-    xhat = check("psi", o.call_psi(z, p.n_x), p.n_x, "n_x")
-    check("f_o", o.call_f_o(0.0, z, u, y, p.call_h(xhat)), o.n_z, "n_z")
+    check("f_p", call("f_p", p.call_f_p, 0.0, x, u, v), p.n_x, "n_x")
+    y = read_only(check("h", call("h", p.call_h, x), p.n_y, "n_y"))
+    xhat = read_only(check("psi", call("psi", o.call_psi, z, p.n_x), p.n_x, "n_x"))
+    yhat = read_only(np.asarray(call("h", p.call_h, xhat), dtype=float))
+    check("f_o", call("f_o", o.call_f_o, 0.0, z, u, y, yhat), o.n_z, "n_z")
 
 
 def _check_noise(pb: EstimationProblem) -> None:

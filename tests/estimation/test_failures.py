@@ -1,0 +1,173 @@
+"""Estimation problems that hung or gave silent wrong results (issue 14), on both solvers.
+
+Each run now ends with a named status after a bounded number of jumps or steps, and
+each failure names the function at fault; the tests assert statuses and counts, never
+wall-clock time.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from etobs import EstimationProblem, Node, Observer, Plant, simulate
+from etobs.errors import ModelError
+from etobs.hybrid import SaveAt, SolverOptions
+from etobs.model import Custom, DynamicRule, Linear, PeriodicRule, Quadratic, StaticRule
+from etobs.model.rules import send_on_delta
+
+BACKENDS = ["engine", "scipy"]
+WRITES = "writes into one of its input arrays, which are read-only"
+
+
+def _problem(f_p, rule, h=None):
+    plant = Plant(f_p=f_p, h=h or (lambda x: x.copy()), n_x=1, n_y=1)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: ybar - z, n_z=1)
+    return EstimationProblem(plant=plant, observer=observer, nodes=[Node((0,), rule)])
+
+
+def _run(pb, t_end, backend, **options):
+    return simulate(
+        pb, [1.0], t_end, backend=backend, options=SolverOptions(**options), save=SaveAt(steps=False)
+    )
+
+
+def _cosine(t, x, u, v):
+    return np.array([math.cos(t)])
+
+
+def _square(t, x, u, v):
+    return x * x
+
+
+def _decay(t, x, u, v):
+    return -x
+
+
+def _stiff(t, x, u, v):
+    return -1e6 * x
+
+
+# ---- statuses in bounded time ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_tiny_eps_ends_zeno(backend):
+    # eps = 1e-300: a transmission whenever |e| >= 1e-150, i.e. at every event the solver
+    # can place. Before: a million jumps in 5e-7 s, then max_jumps (a sweep was killed)
+    res = _run(_problem(_cosine, StaticRule(gamma=Quadratic(1.0), eps=1e-300)), 1.0, backend)
+    assert res.status_labels() == ["zeno"]
+    assert res.solution.j_final[0] < 5_000
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_finite_escape_with_transmissions_ends_with_a_jump_limit(backend):
+    # x' = x^2 escapes at t = 1; the transmissions grow without bound before it (x/0.03
+    # of them by x). Not Zeno in time (the jumps stay resolvable until x ~ 1e5): the jump
+    # limit ends it, after 12 s on the engine with the default million
+    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.5, b=0.5, eps=1e-3, eta0=1.0)
+    res = _run(_problem(_square, rule), 10.0, backend, max_jumps=2_000)
+    assert res.status_labels() == ["max_jumps"]
+    assert res.solution.t_final[0] < 1.0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("period", [1e-9, 1e-7])
+def test_a_tiny_period_ends_with_the_jump_limit(backend, period):
+    # PeriodicRule(1e-9) over 1 s is a billion transmissions (the audit's run was killed)
+    res = _run(_problem(_decay, PeriodicRule(period)), 1.0, backend, max_jumps=2_000)
+    assert res.status_labels() == ["max_jumps"]
+    assert res.solution.t_final[0] == pytest.approx(2_000 * period, rel=1e-3)
+    assert "many transmissions (a short period" in res.messages()[0]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_stiff_plant_ends_with_the_step_limit(backend):
+    # x' = -1e6 x: ~156,000 explicit steps per second of horizon (scipy: 75 s for 1 s)
+    res = _run(_problem(_stiff, send_on_delta(0.1)), 1e4, backend, max_steps=3_000)
+    assert res.status_labels() == ["max_steps"]
+    assert res.solution.n_steps[0] + res.solution.n_rejected[0] <= 3_000
+
+
+# ---- a trigger function that is NaN --------------------------------------------------------
+
+
+def _nan_past(s):
+    # finite where Custom probes it (up to 1e3), NaN from 2e3 on
+    return s if s < 2e3 else math.nan
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_nan_trigger_function_ends_the_run_naming_the_guard(backend):
+    # x' = 1e3 and eps = 5e3: |e| reaches 2e3 at t = 2, where gamma turns NaN. Before: the
+    # node never sent again and the run "completed"
+    rule = StaticRule(gamma=Custom(_nan_past), eps=5e3)
+    res = _run(_problem(lambda t, x, u, v: np.full(1, 1e3), rule), 10.0, backend)
+    assert res.status_labels() == ["model_error"]
+    assert res.solution.t_final[0] <= 2.0 + 1e-9
+    assert "guard` returned NaN" in res.messages()[0]
+
+
+# ---- shapes checked at every call ----------------------------------------------------------
+
+
+def _long_late(t, x, u, v):
+    if t > 0.5:
+        return np.array([-x[0], 0.0])
+    return -x
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_wrong_length_late_in_a_run_ends_it_naming_f_p(backend):
+    # checked at every call, not once at construction: no broadcast, no silent result
+    res = _run(_problem(_long_late, send_on_delta(0.1)), 1.0, backend)
+    assert res.status_labels() == ["model_error"]
+    assert res.solution.t_final[0] <= 0.5
+    assert "`f_p` returned" in res.messages()[0]
+
+
+def _scalar_late(t, x, u, v):
+    if t > 0.5:
+        return -x[0]
+    return -x
+
+
+def test_a_scalar_late_in_a_run_is_refused_by_the_engine_and_ends_the_reference_run():
+    pb = _problem(_scalar_late, send_on_delta(0.1))
+    # numba types the function once: an array here and a float there cannot be compiled
+    with pytest.raises(ModelError, match=r"^`f_p` cannot be compiled"):
+        _run(pb, 1.0, "engine")
+    res = _run(pb, 1.0, "scipy")
+    assert res.status_labels() == ["model_error"]
+    assert "`f_p` returned shape (); expected (1,) for one run" in res.messages()[0]
+
+
+# ---- read-only inputs ----------------------------------------------------------------------
+
+
+def _doubles_x(t, x, u, v):
+    x[0] = 2.0 * x[0]
+    return -x
+
+
+def test_a_function_that_writes_into_its_input_is_refused_when_the_problem_is_built():
+    # before: the engine's results changed (nonfinite at t = 8e-8), the reference failed
+    # inside brentq with "f(a) and f(b) must have different signs"
+    with pytest.raises(ModelError, match=rf"^`f_p` {WRITES}"):
+        _problem(_doubles_x, send_on_delta(0.1))
+
+
+def _writes_late(t, x, u, v):
+    if t > 0.5:
+        x[0] = 0.0
+    return -x
+
+
+def test_a_late_write_into_an_input_is_refused_with_the_same_words_on_both_backends():
+    pb = _problem(_writes_late, send_on_delta(0.1))  # the write is not reached at t = 0
+    with pytest.raises(ModelError, match=rf"^`f_p` {WRITES}"):
+        _run(pb, 1.0, "engine")  # numba refuses the write when it compiles the function
+    res = _run(pb, 1.0, "scipy")
+    assert res.status_labels() == ["model_error"]
+    assert f"`f_p` {WRITES}" in res.messages()[0]
+    assert res.solution.t_final[0] <= 0.5
