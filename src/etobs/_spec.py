@@ -31,9 +31,9 @@ class SpecError(InputError):
 #: Largest spec file read, in bytes. Specs are a few kB; a limit keeps reading bounded
 #: (``etobs sweep /dev/zero`` read until memory ran out).
 MAX_SPEC_BYTES = 1 << 20
-#: Deepest nesting of tables and arrays in a spec. The formats need 4 (``[system]``
-#: ``params`` ``{ delay = { uniform = [...] } }``); a per-node list of lists is 5. Deep
-#: nesting otherwise reaches Python's recursion limit inside the TOML parser.
+#: Deepest nesting of tables and arrays in a spec. The formats need 5 (a comparison's
+#: ``networks[1].delay.uniform[0]``); deeper nesting reached Python's recursion limit
+#: inside the TOML parser.
 MAX_DEPTH = 16
 
 _F = TypeVar("_F", bound=Callable[..., Any])
