@@ -209,3 +209,60 @@ def test_the_installed_command_prints_one_line_and_no_traceback(tmp_path):
     )
     assert out.returncode == 2
     assert out.stderr == f"etobs: error: spec file '{spec}' is not UTF-8 text: byte 8 is 0xff\n"
+
+
+CHECK = """[system]
+factory = "robot_arm"
+[observer]
+{observer}
+[guarantees]
+E = [10.0, 20.0]
+{guarantees}
+"""
+PAPER = 'structure = "robot_arm"\nL = "paper"\nc_v = 0.1\nc = [0.1, 0.1]'
+OWN = 'A = [[0.0, 1.0], [-1.0, -0.2]]\nC = [[1.0, 0.0]]\nL = "design"\nc_v = 0.1\nc = [0.1, 0.1]'
+
+
+@pytest.mark.parametrize(
+    ("observer", "guarantees", "says"),
+    [
+        (PAPER.replace('"robot_arm"', "[]"), "", r"`observer.structure` must be one of robot_arm; got \[\]"),
+        (PAPER.replace("c = [0.1, 0.1]", "c = 1.5"), "", r"`observer.c` must be a list of numbers"),
+        (PAPER.replace("c_v = 0.1", 'c_v = "0.1"'), "", r"`observer.c_v` must be a number; got '0.1'"),
+        (
+            PAPER.replace('"paper"', '"mine"'),
+            "",
+            r"`observer.L` must be 'design', 'paper' or a matrix; got 'mine'",
+        ),
+        (PAPER, "noise = 0.01", r"`guarantees.noise` must be a list of numbers \(one per node\); got 0.01"),
+        (PAPER, "d = [1, true]", r"`guarantees.d\[1\]` must be a number; got True"),
+        (PAPER, 'a_U = "fast"', r"`guarantees.a_U` must be a number; got 'fast'"),
+        (OWN.replace("[[1.0, 0.0]]", '"x"'), "", r"`observer.C` must be a matrix of real numbers; got 'x'"),
+        (OWN + "\nG = [[0.0], [1.0]]", "", r"missing key `observer.H` \(G, H and slopes go together\)"),
+        (
+            OWN + "\nG = [[0.0], [1.0]]\nH = [[1.0, 0.0]]\nslopes = [[1.0]]",
+            "",
+            r"`observer.slopes` has shape \(1, 1\); expected \('\*', 2\)",
+        ),
+        (
+            PAPER.replace("c = [0.1, 0.1]", "c = [0.1, 0.1, 0.1]"),
+            "",
+            r"`observer`: `c` must have one constant per node \(2\); got 3",
+        ),
+    ],
+)
+def test_check_values_of_the_wrong_type_name_their_key(observer, guarantees, says, tmp_path, capsys):
+    pytest.importorskip("cvxpy")
+    # each was a traceback (TypeError, ValueError) from inside the design functions
+    spec = tmp_path / "check.toml"
+    spec.write_text(CHECK.format(observer=observer, guarantees=guarantees))
+    line = one_clear_line(*run(["check", str(spec)], capsys))
+    assert re.search(says, line), line
+
+
+@pytest.mark.parametrize("kind", ["[]", "{}", "3", '"fast"'])
+def test_a_rule_kind_of_the_wrong_type_names_the_key(kind, tmp_path, capsys):
+    spec = tmp_path / "compare.toml"
+    spec.write_text(compare_spec().replace('kind = "base"', f"kind = {kind}"))
+    line = one_clear_line(*run(["compare", str(spec)], capsys))
+    assert re.search(r"`rules\[0\].kind` must be one of base, dynamic, static, periodic", line), line

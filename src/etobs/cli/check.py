@@ -30,8 +30,10 @@ bad input.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -42,6 +44,7 @@ from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.cli._args import load_toml
+from etobs.errors import InputError, InputTypeError
 from etobs.examples.registry import make_problem, resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
@@ -57,8 +60,6 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the problem and the ISS gains of the spec, certify, print; 1 if a condition fails."""
-    from etobs.design import certify
-
     raw = _load(args.spec)
     top = _keys("spec", raw, {"system"}, {"observer", "guarantees", "name"})
     system = _keys("system", top["system"], {"factory"}, {"params"})
@@ -68,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
     problem = make_problem(system["factory"], params, "system.params")
     iss = None
     if "observer" in top:
-        iss, L = _iss(top["observer"], problem)
+        with _table("observer"):
+            iss, L = _iss(top["observer"], problem)
         # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
         if "L" not in params and "L" in inspect.signature(resolve_factory(system["factory"])).parameters:
             problem = make_problem(system["factory"], {**params, "L": L}, "system.params with observer.L")
@@ -78,13 +80,26 @@ def run(args: argparse.Namespace) -> int:
         set(),
         {"E", "E_estimate", "noise", "disturbance", "a_U", "d"},
     )
+    cert = _certify(problem, iss, g)  # its errors name the key (`noise`, `E`) or the problem
+    print(cert.to_json() if args.json else cert.format())
+    if not cert.ok and not args.json:
+        for c in cert.failures():
+            where = "" if c.node is None else f"node {c.node}: "
+            print(f"etobs: condition failed: {where}{c.name} ({c.detail})", file=sys.stderr)
+    return 0 if cert.ok else 1
+
+
+def _certify(problem: Any, iss: Any, g: dict[str, Any]) -> Any:
+    """The certificate of ``problem`` with the ``[guarantees]`` table ``g``."""
+    from etobs.design import certify
+
     if "E_estimate" in g:
         E: Any = _estimate(problem, g["E_estimate"])
     elif isinstance(g.get("E"), list):
         E = _numbers("guarantees.E", g["E"])
     else:
         E = None if "E" not in g else _number("guarantees.E", g["E"])
-    cert = certify(
+    return certify(
         problem,
         iss,
         d=_numbers("guarantees.d", g["d"]) if "d" in g else None,
@@ -93,12 +108,17 @@ def run(args: argparse.Namespace) -> int:
         noise=_numbers("guarantees.noise", g["noise"]) if "noise" in g else None,
         disturbance=_number("guarantees.disturbance", g.get("disturbance", 0.0)),
     )
-    print(cert.to_json() if args.json else cert.format())
-    if not cert.ok and not args.json:
-        for c in cert.failures():
-            where = "" if c.node is None else f"node {c.node}: "
-            print(f"etobs: condition failed: {where}{c.name} ({c.detail})", file=sys.stderr)
-    return 0 if cert.ok else 1
+
+
+@contextlib.contextmanager
+def _table(key: str) -> Iterator[None]:
+    """Name the spec table ``key`` in an input error raised by the design functions it feeds."""
+    try:
+        yield
+    except SpecError:
+        raise
+    except (InputError, InputTypeError) as exc:  # e.g. quadratic_iss_gains's "`c` must have 2 entries"
+        raise SpecError(f"`{key}`: {exc}") from exc
 
 
 def _load(name: str) -> dict[str, Any]:
