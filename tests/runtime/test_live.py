@@ -218,3 +218,57 @@ def test_a_restarted_sensor_resumes_above_its_old_sequence_numbers(tmp_path):
     with pytest.raises(ValueError, match=r"sequence file .* is damaged"):
         (tmp_path / "big.seq").write_text(str(2**64))
         SequenceStore(tmp_path / "big.seq")
+
+
+def test_a_genuine_packet_lost_in_a_flood_is_counted_as_a_gap():
+    """5,000 junk datagrams sent as fast as the machine allows, 100 genuine packets among
+    them, one of which never sent (lost): every genuine sequence number is applied or
+    counted missing, so a loss (in the flood or on the way) shows; nothing else changes."""
+    import asyncio
+    import socket
+    import threading
+
+    from etobs.runtime.server import ObserverServer
+
+    async def main():
+        core = ObserverCore(linear.factory(), KEYS, session=5.0)
+        srv = ObserverServer(core, epoch=5.0)
+        port, _ = await srv.start()
+
+        def packet(seq):
+            return encode(Packet(0, seq, 0.001 * seq, (1.0,), seq == 1, session=5.0), KEYS[0])
+
+        genuine = [packet(s) for s in range(2, 101)]
+        lost = genuine.pop(49)  # seq 51 never arrives
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+
+        def flood():
+            for k in range(5000):
+                sock.sendto(b"junk" * (k % 16 + 1), ("127.0.0.1", port))
+                if k % 50 == 0 and genuine:
+                    sock.sendto(genuine.pop(0), ("127.0.0.1", port))
+
+        try:
+            sock.sendto(packet(1), ("127.0.0.1", port))  # the first and last arrive for sure:
+            await srv._drain()  # the numbers before and after them are not the subject
+            th = threading.Thread(target=flood)
+            th.start()
+            while th.is_alive():  # the service reads while the flood goes on
+                await asyncio.sleep(0.001)
+            th.join()
+            await srv._drain()
+            sock.sendto(packet(101), ("127.0.0.1", port))
+            await srv._drain()
+        finally:
+            sock.close()
+            await srv.close()
+        return core, lost
+
+    core, lost = asyncio.run(main())
+    snap = core.snapshot()
+    c = snap["counts"]
+    assert decode(lost, KEYS).seq == 51 and snap["last_seq"] == [101]
+    assert c["initial"] == 1 and c["applied"] + snap["gaps"][0] == 100  # seq 2..101
+    assert snap["gaps"][0] >= 1 and c["malformed"] + c["initial"] + c["applied"] <= 5000 + 100
+    assert set(c) == set(VERDICTS) and c["forged"] == c["stale"] == c["replayed"] == 0

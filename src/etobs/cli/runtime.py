@@ -37,6 +37,9 @@ from etobs.runtime.deployment import Deployment, parse_deployment
 PACKAGED = {"robot_arm": "robot_arm_live.toml"}
 #: A simulated sensor computes every sample of its plant before it starts.
 MAX_SIMULATED_SAMPLES = 1e7
+#: How long ``demo live`` waits for a sensor process to compute its samples: only a broken
+#: one takes that long, even on a loaded machine compiling its model first.
+READY_TIMEOUT = 1800.0
 
 
 def load(name: str) -> Deployment:
@@ -295,10 +298,19 @@ def run_demo_live(args: argparse.Namespace) -> int:
             for i in range(pb.n_nodes)
         ]
         try:
-            for p in procs:  # each prints "ready" once its plant samples are computed
-                line = await asyncio.wait_for(asyncio.to_thread(p.stdout.readline), timeout=120)  # type: ignore[union-attr]
+            for i, p in enumerate(procs):  # each prints "ready" once its plant samples are computed
+                try:
+                    line = await asyncio.wait_for(
+                        asyncio.to_thread(p.stdout.readline),  # type: ignore[union-attr]
+                        timeout=READY_TIMEOUT,
+                    )
+                except TimeoutError:
+                    raise InputError(
+                        f"the sensor process of node {i} was not ready after {READY_TIMEOUT:g} s "
+                        "(it computes its plant's samples first)"
+                    ) from None
                 if line.strip() != "ready":
-                    raise InputError(f"a sensor process failed to start (exit {p.poll()})")
+                    raise InputError(f"the sensor process of node {i} failed to start (exit {p.poll()})")
             srv.epoch = time.time() + 0.2
             for p in procs:
                 p.stdin.write(f"{srv.epoch!r}\n")  # type: ignore[union-attr]

@@ -3,8 +3,9 @@
 ::
 
     node = SensorNode(node=0, key=key, rule=SampledRule(spec, period=0.01),
-                      send=udp_sender("127.0.0.1", 47000), seq=SequenceStore("node0.seq"))
-    run(node, read=lambda t: [read_adc()], period=0.01, duration=60.0)
+                      send=udp_sender("127.0.0.1", 47000), seq=SequenceStore("node0.seq"),
+                      session=epoch)
+    run(node, read=lambda t: [read_adc()], period=0.01, duration=60.0, epoch=epoch)
 
 At its first sample the node sends its value flagged *initial* (the observer's starting
 ``ybar``; not counted as a transmission), then at every sample ``t_k = k T`` it computes

@@ -230,6 +230,8 @@ class ObserverServer:
         """
         for _ in range(DRAIN_TURNS):
             before = self.received
+            # a turn's reads run after this task resumes: the second turn sees the first's
+            await asyncio.sleep(0)
             await asyncio.sleep(0)
             if self.received == before:
                 return
