@@ -57,6 +57,24 @@ from etobs.hybrid import HybridSystem, solve, solve_reference
             r"`outputs` must be an int or a sequence of ints",
         ),
         (lambda: v.real("x", 2.0, upper=1.0, upper_open=True), InputError, r"`x` must be < 1; got 2"),
+        # integers beyond float range (from a spec) raised OverflowError; long values are shortened
+        (
+            lambda: v.real("x", 10**400),
+            InputError,
+            r"`x` must be a finite real number; got 1000000000\.\.\.0+$",
+        ),
+        (
+            lambda: v.vector("a", [10**400]),
+            InputTypeError,
+            r"`a` must be a vector of real numbers; got \[10+\.\.\.",
+        ),
+        (lambda: v.matrix("L", [[10**400]], (1, 1)), InputTypeError, r"`L` must be a matrix of real numbers"),
+        (lambda: v.batch("x0", [10**400], 1), InputTypeError, r"`x0` must be an array of real numbers"),
+        (
+            lambda: v.vector("a", ["x"] * 10**5),
+            InputTypeError,
+            r"got \['x', 'x', 'x', 'x', 'x', 'x', 'x', 'x', \.\.\.\]$",
+        ),
     ],
 )
 def test_validators(call, exc, match):
