@@ -471,3 +471,14 @@ def _alive(pid):
     except OSError:
         return False
     return state != "Z"
+
+
+def test_a_malformed_dask_scheduler_address_is_an_input_error(tiny, tmp_path):
+    pytest.importorskip("distributed", reason="the dask extra is not installed")
+    from etobs import InputError
+
+    # it was a ValueError traceback from distributed
+    with pytest.raises(
+        InputError, match=r"`scheduler` \(--scheduler\) must be an address such as tcp://host:8786"
+    ):
+        run_sweep(tiny, tmp_path, executor="dask", scheduler="foo", progress=False)

@@ -154,6 +154,11 @@ def _dask(
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
             raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from exc
+        except ValueError as exc:  # e.g. no port: "missing port number in address 'foo'"
+            raise InputError(
+                f"`scheduler` (--scheduler) must be an address such as tcp://host:8786; "
+                f"got {scheduler!r}: {exc}"
+            ) from exc
     try:
         futures = [client.submit(run_task, *job, t, pure=False) for t in tasks]
         index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
