@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from etobs.errors import ModelError
+from etobs.hybrid.system import raised
 
 if TYPE_CHECKING:
     from etobs.estimation.problem import EstimationProblem
@@ -104,15 +105,15 @@ def _rows(name: str, n: int, fn: Any, *batches: np.ndarray) -> np.ndarray:
     Any failure, an exception or a result of another shape, is a ``ModelError`` naming
     ``name``: the scipy reference ends that run with ``model_error``.
     """
-    from etobs.hybrid.system import raised, read_only
-
     B = batches[0].shape[0]
     out = np.empty((B, n))
     for b in range(B):
-        args = [read_only(a[b]) for a in batches]
+        args = [a[b] for a in batches]  # rows are new views: read-only without another view
+        for a in args:
+            if a.ndim:
+                a.setflags(write=False)
         try:
-            r = fn(*args)
-            arr = np.asarray(r, dtype=float)
+            arr = np.asarray(fn(*args), dtype=float)
         except Exception as exc:  # the user's function: any failure ends the run the same way
             raise ModelError(raised(name, exc)) from exc
         if arr.shape != (n,):

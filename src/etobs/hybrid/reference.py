@@ -364,7 +364,7 @@ def _call(name: str, fn: Any, *args: Any) -> Any:
     The run then ends with ``model_error`` (:func:`solve_reference`), as on the engine.
     """
     try:
-        return fn(*(read_only(a) for a in args))
+        return fn(*[read_only(a) for a in args])
     except ModelError:
         raise
     except Exception as exc:  # the user's function: any exception ends its run the same way
