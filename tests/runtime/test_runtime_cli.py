@@ -259,3 +259,32 @@ def test_the_http_token_file(tmp_path):
     given.chmod(0o604)
     with pytest.raises(SpecError, match=r"has mode 0604: .* run `chmod 600"):
         replace(dep, http_token_file=given).token()
+
+
+@pytest.mark.parametrize("command", ["serve", "sensor"])
+def test_ctrl_c_ends_a_process_with_its_state_and_no_traceback(tmp_path, command):
+    _secret(tmp_path)
+    spec = tmp_path / "deploy.toml"
+    spec.write_text(SPEC.format(duration=600.0, scale=1.0, port=0).replace("port = 0", "port = 9"))
+    argv = [sys.executable, "-m", "etobs", command, str(spec), "--epoch", "-"]
+    argv += ["--node", "0"] if command == "sensor" else []
+    proc = subprocess.Popen(
+        argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        if command == "sensor":
+            assert proc.stdout.readline().strip() == "ready"
+        else:
+            assert proc.stderr.readline().startswith("etobs serve: UDP")
+        proc.stdin.write(f"{time.time()!r}\n")
+        proc.stdin.flush()
+        if command == "serve":
+            assert proc.stderr.readline().startswith("etobs serve: epoch")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130 and "Traceback" not in err and f"etobs {command}: interrupted" in err
+    assert "transmissions" in json.loads(out.strip().splitlines()[-1])

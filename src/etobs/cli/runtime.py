@@ -228,17 +228,24 @@ def run_sensor(args: argparse.Namespace) -> int:
     with sender as send:
         _, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
         print("ready", flush=True)
-        epoch = _epoch(args.epoch, dep)
-        rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
-        node = SensorNode(args.node, key, rule, send, seq, session=epoch)
-        n = run(
-            node,
-            lambda t: y[round(t / dep.period), outputs],
-            dep.period,
-            dep.duration,
-            epoch=epoch,
-            time_scale=dep.time_scale,
-        )
+        node = None
+        try:
+            epoch = _epoch(args.epoch, dep)
+            rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
+            node = SensorNode(args.node, key, rule, send, seq, session=epoch)
+            n = run(
+                node,
+                lambda t: y[round(t / dep.period), outputs],
+                dep.period,
+                dep.duration,
+                epoch=epoch,
+                time_scale=dep.time_scale,
+            )
+        except KeyboardInterrupt:  # Ctrl-C: what was sent so far, no traceback
+            print("etobs sensor: interrupted", file=sys.stderr)
+            sent = 0 if node is None else node.transmissions
+            print(json.dumps({"node": args.node, "transmissions": sent}))
+            return 130
     print(json.dumps({"node": args.node, "samples": n, "transmissions": node.transmissions}))
     return 0
 
