@@ -217,6 +217,10 @@ def test_a_failing_chunk_is_reported_and_the_rest_runs(tmp_path, monkeypatch, ca
         ({"execution": {"chunk_size": 0}}, r"`execution.chunk_size` must be >= 1; got 0"),
         ({"system": {"factory": "robot_arm", "fixed": {}}}, r"unknown key `system.fixed`; allowed keys"),
         ({"metrics": {"error_window": [6.0, 9.0]}}, r"`metrics.error_window` must lie within \[0, horizon"),
+        (
+            {"initial_states": {"low": [0, 0], "high": [1, 1], "runs": 10**7, "seed": 1}},
+            r"`rules` x `networks` \(14 groups\) x `initial_states.runs` = 10000000 \(or --runs\) make 1.4e\+08",
+        ),
     ],
 )
 def test_spec_errors_name_the_key(change, message):

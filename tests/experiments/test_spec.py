@@ -108,8 +108,26 @@ def test_bad_files(tmp_path):
             r"`metrics.transmissions_window` must lie within",
         ),
         ({"execution": {"chunk_size": 0}}, r"`execution.chunk_size` must be >= 1; got 0"),
+        # sizes that ran out of memory: every run was listed, the grid was allocated in each chunk
+        (
+            {"initial_states": {"low": [0], "high": [1], "runs": 10**12, "seed": 1}},
+            r"`rows` x `scenarios` \(4 groups\) x `initial_states.runs` = 1000000000000 \(or --runs\) make "
+            r"4e\+12 runs; at most 1e\+07 in one experiment: split it",
+        ),
+        (
+            {"rows": None, "grid": {"a": list(range(100)), "b": list(range(100)), "c": list(range(300))}},
+            r"`grid` x `scenarios` \(6e\+06 groups\) x `initial_states.runs` = 5",
+        ),
+        (
+            {"metrics": {"error_window": [2.0, 3.0], "error_grid_step": 1e-12}},
+            r"`metrics.error_grid_step` = 1e-12 gives 1e\+12 grid points on `metrics.error_window`; at most "
+            r"1e\+07: use a step >= 1e-07",
+        ),
     ],
 )
 def test_more_bad_specs(change, match):
+    raw = raw_spec(**change)
+    if raw.get("rows", ()) is None:
+        del raw["rows"]
     with pytest.raises(SpecError, match=match):
-        parse_spec(raw_spec(**change))
+        parse_spec(raw)

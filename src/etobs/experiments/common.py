@@ -49,6 +49,14 @@ from etobs.hybrid.solver import check_backend
 _SOLVER_KEYS = {f.name for f in fields(SolverOptions) if f.init}
 #: Runs per chunk when ``execution.chunk_size`` is not given.
 DEFAULT_CHUNK = 20
+#: Most runs in one experiment (groups x initial states). Every run's record is held in
+#: memory and written to the tables (about 1 kB each), and at 0.1 s a run this is twelve
+#: days of one core: split a larger study into several experiments. (``--runs 10**12``
+#: listed every run before failing with MemoryError.)
+MAX_RUNS = 10_000_000
+#: Most points of the error metric's grid (``error_window`` / ``error_grid_step``): 80 MB of
+#: times. (A step of 1e-12 on [0, 0.5] s asked for a 3.6 TiB array in every chunk.)
+MAX_GRID_POINTS = 10_000_000
 #: Format of the stored records; part of every result key, so records written in an
 #: earlier format are never mixed with new ones.
 RECORD_FORMAT = 3
@@ -312,11 +320,29 @@ def parse_initial_states(table: Any) -> InitialStates:
 def parse_metrics(table: Any, t_end: float) -> Metrics:
     """Validate ``[metrics]`` (every key optional) for a horizon ``t_end``."""
     met = _keys("metrics", table, set(), {"transmissions_window", "error_window", "error_grid_step"})
+    error_window = _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end)
+    step = float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True))
+    width = error_window[1] - error_window[0]
+    if width / step > MAX_GRID_POINTS:
+        raise SpecError(
+            f"`metrics.error_grid_step` = {step:g} gives {width / step:.3g} grid points on "
+            f"`metrics.error_window`; at most {MAX_GRID_POINTS:g}: use a step >= {width / MAX_GRID_POINTS:g}"
+        )
     return Metrics(
         _window("metrics.transmissions_window", met.get("transmissions_window", [0.0, t_end]), t_end),
-        _window("metrics.error_window", met.get("error_window", [0.0, t_end]), t_end),
-        float(_number("metrics.error_grid_step", met.get("error_grid_step", 1e-3), lower=0.0, strict=True)),
+        error_window,
+        step,
     )
+
+
+def check_size(groups: int, runs: int, what: str) -> None:
+    """Refuse more than :data:`MAX_RUNS` runs (``groups`` of ``what`` x ``runs`` initial states)."""
+    if groups * runs > MAX_RUNS:
+        raise SpecError(
+            f"{what} ({groups:.3g} groups) x `initial_states.runs` = {runs} (or --runs) make "
+            f"{groups * runs:.3g} runs; "
+            f"at most {MAX_RUNS:g} in one experiment: split it"
+        )
 
 
 def parse_solver(table: Any) -> dict[str, Any]:

@@ -63,7 +63,7 @@ from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
-from etobs.experiments.common import COMMON_KEYS, Experiment, normalize, parse_common
+from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build
 from etobs.model.network import (
     ConstantDelay,
@@ -258,6 +258,7 @@ def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
     params = common.pop("kwargs")
     rules = _list("rules", top["rules"], _rule)
     networks = _list("networks", top.get("networks", [{"name": "ideal"}]), _network)
+    check_size(len(rules) * len(networks), common["initial_states"].runs, "`rules` x `networks`")
     return CompareSpec(**common, params=params, rules=rules, networks=networks, raw=raw)
 
 

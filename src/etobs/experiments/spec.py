@@ -37,6 +37,7 @@ tables a sweep shares with a comparison (``system.factory``, ``initial_states``,
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,7 +46,7 @@ from etobs._spec import SpecError, check_tree, read_toml
 from etobs._spec import keys as _keys
 from etobs._validate import shown
 from etobs.estimation.problem import EstimationProblem
-from etobs.experiments.common import COMMON_KEYS, Experiment, _name, normalize, parse_common
+from etobs.experiments.common import COMMON_KEYS, Experiment, _name, check_size, normalize, parse_common
 from etobs.experiments.systems import build, check_arguments
 
 #: Columns of the result tables; a parameter may not take one of these names.
@@ -138,13 +139,14 @@ def parse_spec(raw: dict[str, Any]) -> SweepSpec:
     fixed = common.pop("kwargs")
     if "rows" in top and "grid" in top:
         raise SpecError("give either `rows` or `grid`, not both")
-    rows = _rows(top)
     scenarios = _scenarios(top.get("scenarios", [{"name": "default"}]))
+    rows = _rows(top, len(scenarios), common["initial_states"].runs)
     _check_names(rows, scenarios, fixed)
     return SweepSpec(**common, fixed=fixed, rows=rows, scenarios=scenarios, raw=raw)
 
 
-def _rows(top: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+def _rows(top: dict[str, Any], scenarios: int, runs: int) -> tuple[dict[str, Any], ...]:
+    """The parameter rows; their number is checked before a grid is expanded."""
     if "grid" in top:
         grid = top["grid"]
         if not isinstance(grid, dict) or not grid:
@@ -152,11 +154,13 @@ def _rows(top: dict[str, Any]) -> tuple[dict[str, Any], ...]:
         for k, vals in grid.items():
             if not isinstance(vals, list) or not vals:
                 raise SpecError(f"`grid.{k}` must be a non-empty list of values; got {shown(vals)}")
+        check_size(math.prod(len(v) for v in grid.values()) * scenarios, runs, "`grid` x `scenarios`")
         keys = list(grid)
         return tuple(dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values()))
     rows = top.get("rows", [{}])
     if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
         raise SpecError("`rows` must be a non-empty array of tables ([[rows]])")
+    check_size(len(rows) * scenarios, runs, "`rows` x `scenarios`")
     return tuple(dict(r) for r in rows)
 
 
