@@ -10,8 +10,10 @@ command.
 """
 
 import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -266,3 +268,40 @@ def test_a_rule_kind_of_the_wrong_type_names_the_key(kind, tmp_path, capsys):
     spec.write_text(compare_spec().replace('kind = "base"', f"kind = {kind}"))
     line = one_clear_line(*run(["compare", str(spec)], capsys))
     assert re.search(r"`rules\[0\].kind` must be one of base, dynamic, static, periodic", line), line
+
+
+def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
+    from tests.experiments.conftest import FACTORY
+
+    started = tmp_path / "started"
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        f'name = "slow"\n[system]\nfactory = "{FACTORY}"\nfixed = {{ delay = 600.0, started = "{started}" }}\n'
+        "[initial_states]\nlow = [-1.0]\nhigh = [1.0]\nruns = 1\nseed = 1\n[horizon]\nt_end = 1.0\n"
+    )
+    argv = [
+        sys.executable,
+        "-m",
+        "etobs",
+        "sweep",
+        str(spec),
+        "--out",
+        str(tmp_path / "o"),
+        "--executor",
+        "serial",
+    ]
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(1200):  # the factory is called once the sweep is under way (at most 120 s)
+            if started.exists() or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert started.exists(), proc.stderr.read() if proc.poll() is not None else "not started"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130
+    assert err == "etobs: interrupted\n"

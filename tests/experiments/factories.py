@@ -23,14 +23,17 @@ def _observer(t, z, u, ybar, yhat, p):
 
 
 @etobs.factory
-def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False):
+def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False, started=""):
     """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
 
     fail: raise (a chunk that fails); delay: sleep (a slow chunk); die_marker: kill the
-    calling process the first time (a worker that dies), creating the marker file.
+    calling process the first time (a worker that dies), creating the marker file;
+    started: create this file when called (a test knows the sweep is under way).
     """
     if fail:
         raise ValueError("this row fails on purpose")
+    if started:
+        Path(started).write_text("called")
     if delay:
         time.sleep(delay)
     if die_always:

@@ -42,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Bad input never ends in a traceback: an :class:`~etobs.errors.EtobsError` (bad input
     or an unsolvable design) or an :class:`OSError` (a file or folder that cannot be
     read or written, an address in use) is one line on stderr and exit status 2; a spec
-    error names the spec file.
+    error names the spec file. Ctrl-C is one line and exit status 130.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -53,6 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename is not None else ""
         parser.exit(2, f"etobs: error: {_one_line(where + (exc.strerror or str(exc)))}\n")
+    except KeyboardInterrupt:  # Ctrl-C: what is stored stays (a rerun resumes), no traceback
+        parser.exit(130, "etobs: interrupted\n")
 
 
 def _in_spec(args: argparse.Namespace, exc: EtobsError) -> str:
