@@ -227,9 +227,9 @@ def run_sensor(args: argparse.Namespace) -> int:
         sender = udp_sender(dep.host, dep.port)
     with sender as send:
         _, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
-        print("ready", flush=True)
         node = None
         try:
+            print("ready", flush=True)
             epoch = _epoch(args.epoch, dep)
             rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
             node = SensorNode(args.node, key, rule, send, seq, session=epoch)
