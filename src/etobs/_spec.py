@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import datetime
 import math
+import os
+import stat
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
@@ -90,7 +92,11 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     """
     name = str(path)
     try:
-        with open(path, "rb") as fh:
+        # O_NONBLOCK: opening a named pipe with no writer would otherwise wait for good
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with open(fd, "rb") as fh:
+            if stat.S_ISFIFO(os.fstat(fd).st_mode) or stat.S_ISSOCK(os.fstat(fd).st_mode):
+                raise SpecError(f"spec file {name!r} is a pipe or socket; expected a TOML file")
             data = fh.read(MAX_SPEC_BYTES + 1)
     except FileNotFoundError:
         raise SpecError(f"spec file {name!r} does not exist") from None

@@ -9,6 +9,7 @@ every command that reads a spec (``sweep``, ``compare``, ``check``, ``serve`` an
 command.
 """
 
+import os
 import re
 import signal
 import subprocess
@@ -154,6 +155,33 @@ def test_an_endless_spec_file_is_read_in_bounded_memory(command, capsys):
     _, extra, _ = COMMANDS[command]
     line = one_clear_line(*run([command, "/dev/zero", *extra], capsys))
     assert "spec file '/dev/zero' is larger than 1048576 bytes" in line
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_a_named_pipe_as_spec_is_refused_without_waiting_for_a_writer(command, tmp_path, capsys):
+    # opening a FIFO with no writer blocked for good
+    fifo = tmp_path / "spec.toml"
+    os.mkfifo(fifo)
+    _, extra, _ = COMMANDS[command]
+    line = one_clear_line(*run([command, str(fifo), *extra], capsys))
+    assert f"spec file '{fifo}' is a pipe or socket; expected a TOML file" in line
+
+
+def test_a_closed_stdout_pipe_ends_quietly_with_status_141(tmp_path):
+    # `etobs check robot_arm --json | head -c 10` printed "etobs: error: Broken pipe", exit 2
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "etobs", "check", "robot_arm", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()  # the reader leaves before anything is written
+    try:
+        err = proc.stderr.read().decode()
+        assert proc.wait(timeout=300) == 141
+    finally:
+        proc.kill()
+        proc.stderr.close()
+    assert err == ""
 
 
 @pytest.mark.parametrize("command", list(COMMANDS))

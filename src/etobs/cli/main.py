@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -42,19 +43,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     Bad input never ends in a traceback: an :class:`~etobs.errors.EtobsError` (bad input
     or an unsolvable design) or an :class:`OSError` (a file or folder that cannot be
     read or written, an address in use) is one line on stderr and exit status 2; a spec
-    error names the spec file. Ctrl-C is one line and exit status 130.
+    error names the spec file. Ctrl-C is one line and exit status 130; a closed pipe on
+    stdout (``etobs ... | head``) ends quietly with status 141, as a shell reports it.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args))
+        code = int(args.func(args))
+        sys.stdout.flush()  # inside the try: a reader that left is seen here, not at exit
+        return code
     except EtobsError as exc:
         parser.exit(2, f"etobs: error: {_one_line(_in_spec(args, exc))}\n")
+    except BrokenPipeError:  # `etobs ... | head`: the reader left; end quietly, as a shell would
+        _silence_stdout()
+        return 141
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename is not None else ""
         parser.exit(2, f"etobs: error: {_one_line(where + (exc.strerror or str(exc)))}\n")
     except KeyboardInterrupt:  # Ctrl-C: what is stored stays (a rerun resumes), no traceback
         parser.exit(130, "etobs: interrupted\n")
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def _in_spec(args: argparse.Namespace, exc: EtobsError) -> str:
