@@ -333,3 +333,15 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
             proc.wait()
     assert proc.returncode == 130
     assert err == "etobs: interrupted\n"
+
+
+def test_an_os_error_without_a_message_still_says_what_happened(monkeypatch, capsys):
+    # a TimeoutError (an OSError with no strerror and no text) printed "etobs: error: " and nothing else
+    import etobs.cli.check as check_cli
+
+    def times_out(args):
+        raise TimeoutError
+
+    monkeypatch.setattr(check_cli, "run", times_out)
+    line = one_clear_line(*run(["check", "robot_arm"], capsys))
+    assert line == "etobs: error: TimeoutError"

@@ -59,7 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 141
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename is not None else ""
-        parser.exit(2, f"etobs: error: {_one_line(where + (exc.strerror or str(exc)))}\n")
+        parser.exit(
+            2, f"etobs: error: {_one_line(where + (exc.strerror or str(exc) or type(exc).__name__))}\n"
+        )
     except KeyboardInterrupt:  # Ctrl-C: what is stored stays (a rerun resumes), no traceback
         parser.exit(130, "etobs: interrupted\n")
 
