@@ -20,8 +20,12 @@ Solver contract (what :func:`solve` guarantees for every run of the batch):
 4. At an event every rule with ``g_k >= 0`` jumps once, in rule order, each with its own
    ``j``; the event functions are then evaluated again and the jumps repeat until all
    are negative (bounded by ``max_jumps``).
-5. A run ends with status ``completed`` at ``t_end`` or with a failure status of its own
-   (``max_jumps``, ``max_steps``, ``nonfinite``, ``step_underflow``); other runs go on.
+5. A run ends, in bounded time, with status ``completed`` at ``t_end`` or with a failure
+   status of its own (``zeno`` when its jumps pile up in time, :mod:`etobs.hybrid.zeno`;
+   ``max_jumps``, ``max_steps``, ``nonfinite``, ``step_underflow``, ``model_error``);
+   other runs go on. Nothing raises from inside the numerics.
+6. User functions receive read-only arrays; their results are checked (shape, and NaN
+   for event functions) at every call.
 """
 
 from __future__ import annotations
