@@ -15,10 +15,13 @@ import pytest
 from etobs import EstimationProblem, Node, Observer, Plant, simulate
 from etobs.errors import InputError
 from etobs.estimation import input_transmission_counts, max_estimation_error, transmission_counts
-from etobs.hybrid import SaveAt
+from etobs.hybrid import SaveAt, SolverOptions
 from etobs.model import Constant, InputNode, PeriodicRule
 
 BACKENDS = ("engine", "scipy")
+#: These runs take fewer than 200 steps; the bound ends a solver that stalls on the
+#: transmission at t0 (its trigger function is exactly 0 there) with max_steps.
+BOUNDED = SolverOptions(max_steps=5000)
 
 
 @pytest.fixture(params=BACKENDS)
@@ -43,7 +46,7 @@ def _clock_problem(slope=0.0, input_rule=None):
 
 def test_a_transmission_at_the_window_start_is_counted(backend):
     # guards against: transmission_counts' lower bound `t >= t_start` made `t > t_start`
-    res = simulate(_clock_problem(), [0.0], 10.5, backend=backend)
+    res = simulate(_clock_problem(), [0.0], 10.5, backend=backend, options=BOUNDED)
     t = res.transmissions.t
     assert t[0] == 0.0 and len(t) == 11  # the case: sends at 0, ~1, ..., ~10
     assert transmission_counts(res, (0.0, 10.5)).tolist() == [[11]]
@@ -56,7 +59,7 @@ def test_a_transmission_at_the_window_start_is_counted(backend):
 
 def test_a_transmission_at_the_window_end_is_counted(backend):
     # guards against: transmission_counts' upper bound `t <= t_stop` made `t < t_stop`
-    res = simulate(_clock_problem(), [0.0], 10.5, backend=backend)
+    res = simulate(_clock_problem(), [0.0], 10.5, backend=backend, options=BOUNDED)
     t = res.transmissions.t
     assert len(t) == 11
     assert transmission_counts(res, (0.5, t[10])).tolist() == [[10]]
@@ -69,7 +72,11 @@ def test_a_transmission_at_the_window_end_is_counted(backend):
 def test_input_nodes_are_counted_in_the_same_closed_window(backend):
     # guards against: the input nodes' count taking another window than the outputs'
     res = simulate(
-        _clock_problem(input_rule=PeriodicRule(period=1.0, first=0.0)), [0.0], 3.5, backend=backend
+        _clock_problem(input_rule=PeriodicRule(period=1.0, first=0.0)),
+        [0.0],
+        3.5,
+        backend=backend,
+        options=BOUNDED,
     )
     t_in = res.transmissions.select(rule=1).t
     assert t_in[0] == 0.0 and len(t_in) == 4
@@ -86,7 +93,14 @@ def test_the_error_window_takes_the_grid_points_on_both_ends(backend, slope, x0,
     # guards against: max_estimation_error's `t >= t_start` / `t <= t_stop` made strict
     # |x - xhat| = |x0 + slope t| (xhat = 0): largest at the window's start when falling
     # (10 - 2 = 8), at its end when rising (5)
-    res = simulate(_clock_problem(slope), [x0], 10.0, backend=backend, save=SaveAt(steps=False, grid=GRID))
+    res = simulate(
+        _clock_problem(slope),
+        [x0],
+        10.0,
+        backend=backend,
+        options=BOUNDED,
+        save=SaveAt(steps=False, grid=GRID),
+    )
     assert max_estimation_error(res, (2.0, 5.0))[0] == pytest.approx(expected, abs=1e-9)
     inner = (math.nextafter(2.0, np.inf), math.nextafter(5.0, 0.0))  # points 3 and 4 only
     assert max_estimation_error(res, inner)[0] == pytest.approx(expected - 1.0, abs=1e-9)
@@ -96,7 +110,7 @@ def test_the_error_window_takes_the_grid_points_on_both_ends(backend, slope, x0,
 def test_a_kept_maximum_is_read_on_a_window_that_ends_on_its_first_and_last_grid_points(backend):
     # guards against: the kept-maximum check `t_start <= grid <= t_stop` made strict
     save = SaveAt(steps=False, grid=GRID[2:6], max_distance="estimation_error")
-    res = simulate(_clock_problem(-1.0), [10.0], 10.0, backend=backend, save=save)
+    res = simulate(_clock_problem(-1.0), [10.0], 10.0, backend=backend, options=BOUNDED, save=save)
     assert max_estimation_error(res, (2.0, 5.0))[0] == pytest.approx(8.0, abs=1e-9)
     with pytest.raises(InputError, match=r"does not cover whole"):
         max_estimation_error(res, (math.nextafter(2.0, np.inf), 5.0))

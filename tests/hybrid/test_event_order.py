@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from etobs import EstimationProblem, Node, Observer, Plant, simulate
-from etobs.hybrid import HybridSystem, solve
+from etobs.hybrid import HybridSystem, SolverOptions, solve
 from etobs.model import PeriodicRule
 
 BACKENDS = ("engine", "scipy")
@@ -87,7 +87,8 @@ def test_simultaneous_nodes_send_in_node_order_each_with_its_own_j(backend):
     plant, observer = _still(3)
     nodes = [Node((i,), PeriodicRule(period=0.5, first=0.0), name=f"y{i}") for i in range(3)]
     pb = EstimationProblem(plant=plant, observer=observer, nodes=nodes)
-    res = simulate(pb, [1.0, 2.0, 3.0], 1.2, backend=backend)
+    # (bounded: a solver that stalls on the sends at t0, where g = 0, ends with max_steps)
+    res = simulate(pb, [1.0, 2.0, 3.0], 1.2, backend=backend, options=SolverOptions(max_steps=5000))
     log = res.transmissions
     assert log.rule.tolist() == [0, 1, 2] * 3, f"nodes must send in node order: {log.rule.tolist()}"
     assert log.j.tolist() == list(range(9))
