@@ -8,7 +8,8 @@ for one run at a time so that no work is done for runs that do not need it:
 
 * steps of an embedded Runge--Kutta pair with the same step-size controller;
 * on every accepted step, the event functions sampled on the dense output at
-  ``event_samples - 1`` interior points, the step end and a parabolic peak probe;
+  ``event_samples - 1`` interior points, the step end and the parabolic peak probes
+  (:mod:`etobs.hybrid.peaks`);
 * the first crossing bracketed and refined by regula falsi (Illinois) with bisection
   safeguard to ``event_xtol`` in time, the event reported at the right end;
 * all rules with ``g_k >= 0`` jump once, in rule order, until all are negative.
@@ -44,6 +45,7 @@ from numba.core.extending import intrinsic
 
 from etobs.compile.ccall import address, ccall, load_i64, store_i64
 from etobs.hybrid import _jitcache
+from etobs.hybrid.peaks import peak_probes as _peak_probes
 from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
 from etobs.hybrid.zeno import zeno_window as _zeno_window
@@ -201,31 +203,8 @@ def _all_finite(x):
     return True
 
 
-@numba.njit(error_model="numpy")
-def _peak_probe(g0, gs, ns, S):
-    """Earliest θ where a parabola through a negative local maximum reaches zero.
-
-    Samples are ``g0`` at θ = 0 then ``gs[0..S-1]`` at θ = 1/S, ..., 1 (see
-    :func:`etobs.hybrid.solver.peak_probe`).
-    """
-    m = g0.shape[0]
-    best = np.inf
-    for i in range(1, S):  # interior sample i at θ = i/S is gs[i - 1]
-        for k in range(m):
-            left = g0[k] if i == 1 else gs[i - 2, k]
-            mid = gs[i - 1, k]
-            right = gs[i, k]
-            curv = left - 2.0 * mid + right
-            if mid > left and mid >= right and mid < 0 and curv < 0:
-                peak = mid - (right - left) ** 2 / (8.0 * curv)
-                if peak >= 0:
-                    theta = (i + (left - right) / (2.0 * curv)) / S
-                    if theta < best:
-                        best = theta
-    if best == np.inf:
-        return np.nan
-    return best
-
+#: The peak probes' one definition (:mod:`etobs.hybrid.peaks`), compiled into the kernel.
+peak_probes = numba.njit(inline="always", error_model="numpy")(_peak_probes)
 
 #: The Zeno rule's one definition (:mod:`etobs.hybrid.zeno`), compiled into the kernel.
 zeno_window = numba.njit(inline="always", error_model="numpy")(_zeno_window)
@@ -273,7 +252,15 @@ def build(method: str) -> Any:
         {"jit": {"error_model": "numpy"}, "jit_nogil": {"nogil": True, "error_model": "numpy"}},
         depends=tuple(
             here / f
-            for f in ("_kernel.py", "solver.py", "status.py", "tableau.py", "zeno.py", "../compile/ccall.py")
+            for f in (
+                "_kernel.py",
+                "solver.py",
+                "status.py",
+                "tableau.py",
+                "zeno.py",
+                "peaks.py",
+                "../compile/ccall.py",
+            )
         ),
         packages=("scipy",),
     )

@@ -44,7 +44,6 @@ from etobs.hybrid._kernel import (
     _any_nan,
     _any_nonneg,
     _dense_eval,
-    _peak_probe,
     address,
     failed,
     flow,
@@ -53,6 +52,7 @@ from etobs.hybrid._kernel import (
     guard_call,
     jump_call,
     load_i64,
+    peak_probes,
     rows_at,
     run_args,
     store_i64,
@@ -143,7 +143,7 @@ def _kernel(
 def _scratch_size(n, m, S, n_p):
     """Floats of the solver's arrays for one run (see ``_solve_one``)."""
     n_s = max(S - 1, 0)
-    return (N_STAGES + 1 + N_EXTRA) * n + NQ * n + 6 * n + 4 * m + (n_s + 2) * (1 + m) + n_p + 2 + 1
+    return (N_STAGES + 1 + N_EXTRA) * n + NQ * n + 6 * n + 4 * m + (n_s + 4) * (1 + m) + n_s + 2 + n_p + 2 + 1
 
 
 @jit
@@ -220,10 +220,13 @@ def _solve_one(
     gl = vector_at(base, o + 2 * m, m)
     gtmp = vector_at(base, o + 3 * m, m)
     o += 4 * m
-    th_s = vector_at(base, o, n_s + 2)
+    # the samples of a step (S - 1 inside, the end) and up to three peak probes
+    th_s = vector_at(base, o, n_s + 4)
+    o += n_s + 4
+    gs = rows_at(base, o, n_s + 4, m)
+    o += (n_s + 4) * m
+    seq = vector_at(base, o, n_s + 2)  # one event function's samples, θ = 0 .. 1
     o += n_s + 2
-    gs = rows_at(base, o, n_s + 2, m)
-    o += (n_s + 2) * m
     p = vector_at(base, o, p_run.shape[0])
     o += p_run.shape[0]
     zw = vector_at(base, o, 2)  # the Zeno rule's window: its start and its jumps
@@ -358,7 +361,7 @@ def _solve_one(
             theta_ev = np.nan
             if m > 0 and not failed(args):
                 theta_ev = _locate(
-                    args, p, t_start, hh, x, Q, nq, dop853, g, g1, gl, gtmp, S, th_s, gs, xs, xtol_t
+                    args, p, t_start, hh, x, Q, nq, dop853, g, g1, gl, gtmp, S, th_s, gs, seq, xs, xtol_t
                 )
             if failed(args):  # the guard or the dense output failed: keep the last good state
                 accept = False
@@ -581,10 +584,10 @@ def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
 
 
 @jit
-def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs, xtol_t):
+def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, seq, xs, xtol_t):
     """θ of the first event in the step, or NaN (the contract's points 2 and 3)."""
     m = g0.shape[0]
-    # samples θ = i/S (i = 1..S-1), then the end θ = 1, then maybe the peak probe
+    # samples θ = i/S (i = 1..S-1), then the end θ = 1, then maybe the peak probes
     ns = 0
     gp = address(gs)  # row i of gs is at gp + 8 m i
     for i in range(1, S):
@@ -597,8 +600,25 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, xs
         gs[ns, k] = g1[k]
     ns += 1
     if S > 1:
-        probe = _peak_probe(g0, gs, ns, S)
-        if np.isfinite(probe):
+        # etobs.hybrid.peaks: of each kind (start, inside, end) the earliest over the rules
+        first_start = np.inf
+        first_inside = np.inf
+        first_end = np.inf
+        for k in range(m):
+            seq[0] = g0[k]
+            for i in range(S):
+                seq[i + 1] = gs[i, k]
+            start, inside, end = peak_probes(seq, S)
+            # NaN (no probe) compares false
+            if start < first_start:
+                first_start = start
+            if inside < first_inside:
+                first_inside = inside
+            if end < first_end:
+                first_end = end
+        for probe in (first_start, first_inside, first_end):
+            if probe == np.inf:
+                continue
             # insert the probe in θ order (stable: after equal θ)
             pos = ns
             while pos > 0 and th_s[pos - 1] > probe:

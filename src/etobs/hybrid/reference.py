@@ -7,8 +7,9 @@ integrator and event locator. Each flow segment is a ``solve_ivp`` call (method
 ``solve_ivp`` tests the sign of an event function only at step ends, so it misses an
 excursion above zero that starts and ends inside one step. As a guard, every step of
 every segment is also sampled at ``event_samples`` points on ``solve_ivp``'s dense
-output, plus one probe where a parabola through three samples predicts a peak above
-zero; the earliest crossing found either way is refined with :func:`scipy.optimize.brentq`.
+output, plus the peak probes of :mod:`etobs.hybrid.peaks` where a parabola through three
+samples predicts a peak above zero; the earliest crossing found either way is refined
+with :func:`scipy.optimize.brentq`.
 """
 
 from __future__ import annotations
@@ -19,9 +20,10 @@ import numpy as np
 
 from etobs.errors import ModelError
 from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.peaks import peak_probes
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import GridMax, HybridSolution, SavedGrid, max_over_grid
-from etobs.hybrid.solver import check_inputs, peak_probe
+from etobs.hybrid.solver import check_inputs
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import BatchedSystem, HybridSystem, raised, read_only
 from etobs.hybrid.zeno import zeno_window
@@ -323,11 +325,9 @@ class _Run:
         t_all = times.ravel()
         gs = self.gk(t_all, dense(t_all).T).reshape(times.shape[0], S, m)
         g_start = np.concatenate([g0[None], gs[:-1, -1]], axis=0)
-        probe = peak_probe(np.concatenate([g_start[:, None], gs], axis=1))
-        k = np.flatnonzero(np.isfinite(probe))
         g_all = gs.reshape(-1, m)
-        if k.size:
-            tp = ts[k] + probe[k] * h[k]
+        tp = self.probes(ts, np.concatenate([g_start[:, None], gs], axis=1))
+        if tp.size:
             t_all = np.concatenate([t_all, tp])
             g_all = np.concatenate([g_all, self.gk(tp, dense(tp).T)])
         order = np.argsort(t_all, kind="stable")
@@ -337,6 +337,24 @@ class _Run:
             return None
         i = hit[0]
         return (float(t_all[i - 1]) if i > 0 else t_start, float(t_all[i]))
+
+    def probes(self, ts: np.ndarray, seq: np.ndarray) -> np.ndarray:
+        """Times of the peak probes (:mod:`etobs.hybrid.peaks`) on the steps ``ts``.
+
+        ``seq`` (M, S + 1, m) holds the event functions at ``θ = 0, 1/S, ..., 1`` of each
+        step; of each kind (start, inside, end) the earliest over the rules is probed.
+        """
+        S = self.opts.event_samples
+        found = []
+        # rows as lists: the scalar function indexes them much faster than arrays
+        for r, rules in enumerate(np.swapaxes(seq, 1, 2).tolist()):
+            first = [np.inf, np.inf, np.inf]
+            for g in rules:
+                for kind, theta in enumerate(peak_probes(g, S)):
+                    if theta < first[kind]:  # NaN (no probe) compares false
+                        first[kind] = theta
+            found += [ts[r] + theta * (ts[r + 1] - ts[r]) for theta in first if theta < np.inf]
+        return np.array(found)
 
     def locate(self, dense: Any, a: float, b: float) -> float:
         """Earliest crossing in ``[a, b]`` (some g(b) >= 0), returned where ``g >= 0``."""

@@ -11,9 +11,12 @@ Solver contract (what :func:`solve` guarantees for every run of the batch):
    (``SolverOptions.method``) under local error control (``rtol``, ``atol``).
 2. Every event function is evaluated at the start, at ``event_samples - 1`` interior
    points (on the method's own dense output) and at the end of every accepted step, so
-   an excursion above zero longer than ``step / event_samples`` is never missed; at
-   each negative interior local maximum of those samples a parabola predicts the peak,
-   and a predicted peak ``>= 0`` is probed too (catching most shorter excursions).
+   an excursion above zero longer than ``step / event_samples`` is never missed; a
+   parabola through three samples predicts the peak at each negative interior local
+   maximum and at a step end the samples rise towards, and a predicted peak ``>= 0``
+   inside the step is probed too (:mod:`etobs.hybrid.peaks`): a shorter excursion is
+   found wherever its peak lies in the step when the event function is close to a
+   parabola over those samples.
 3. The first crossing is located by bracketing root finding on the dense output to a
    bracket of width ``event_xtol`` in time; the event time reported is the right end,
    where the event function is ``>= 0``, and the state there comes from the dense output.
@@ -150,34 +153,3 @@ def solve(
     from etobs.hybrid.reference import solve_reference
 
     return solve_reference(system, x0, t_span, options=options, save=save)
-
-
-def _parabola_peaks(seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Peaks of the parabolas through each negative interior local maximum of ``seq``.
-
-    ``seq`` (M, S + 1, m) holds event-function values at ``θ = 0, 1/S, ..., 1``. Returns
-    the predicted peak values and their θ, shape (M, S - 1, m); ``-inf`` and NaN where
-    the sample is not such a maximum.
-    """
-    S = seq.shape[1] - 1
-    left, mid, right = seq[:, :-2], seq[:, 1:-1], seq[:, 2:]
-    curv = left - 2.0 * mid + right
-    is_max = (mid > left) & (mid >= right) & (mid < 0) & (curv < 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        peak = mid - (right - left) ** 2 / (8.0 * curv)
-        theta = (np.arange(1, S)[None, :, None] + (left - right) / (2.0 * curv)) / S
-    return np.where(is_max, peak, -np.inf), np.where(is_max, theta, np.nan)
-
-
-def peak_probe(seq: np.ndarray) -> np.ndarray:
-    """Earliest θ per row where a parabola predicts the event function reaches zero.
-
-    At every interior local maximum that is still negative, the parabola through it and
-    its two neighbours predicts the peak; this catches a short excursion above zero
-    between two samples near a smooth maximum, the typical way a sampled test misses.
-    Returns NaN for rows with no such prediction.
-    """
-    peak, theta = _parabola_peaks(seq)
-    theta = np.where(peak >= 0, theta, np.inf)
-    best = theta.min(axis=(1, 2)) if theta.shape[1] else np.full(seq.shape[0], np.inf)
-    return np.where(np.isfinite(best), best, np.nan)
