@@ -91,11 +91,13 @@ def test_what_cannot_be_checked_without_importing_is_refused(name, match):
 def test_a_marked_factory_in_a_file_builds_its_problem(tmp_path):
     path = tmp_path / "mine.py"
     path.write_text(MARKED)
+    # read, not run: its source does not mark `helper` (which `also_marked = etobs.factory(helper)` marks
+    # once it has run: the mark is on the function itself)
+    with pytest.raises(SpecError, match=r"'helper' in '.*mine.py' is not marked as a factory"):
+        resolve_factory(f"{path}:helper")
     problem = make_problem(f"{path}:problem", {"noise": False}, "system.params")
     assert isinstance(problem, EstimationProblem) and problem.n_nodes == 2
     assert is_factory(resolve_factory(f"{path}:also_marked"))
-    with pytest.raises(SpecError, match=r"'helper' in '.*mine.py' is not marked as a factory"):
-        resolve_factory(f"{path}:helper")
 
 
 def test_the_mark_cannot_be_faked():
@@ -130,3 +132,80 @@ def test_whatever_a_factory_raises_names_the_spec_table(tmp_path):
         SpecError, match=r"failed on the arguments of row 1: ValueError: this row fails on purpose"
     ):
         make_problem(FACTORY, {"fail": True}, "row 1")
+
+
+REEXPORT = """
+from pathlib import Path
+Path({marker!r}).write_text("imported")  # what a module may do at import time
+import webbrowser
+from subprocess import run
+from {target} import {name} as reexported
+"""
+
+
+@pytest.mark.parametrize(
+    ("attr", "match"),
+    [
+        # an import of the name used to count as a mark: the module was imported (its code ran), then refused
+        ("webbrowser", r"'webbrowser' in '.*reexport_mod.py' is not marked as a factory, so its module"),
+        ("run", r"'run' in '.*reexport_mod.py' is not marked as a factory, so its module is not"),
+        ("reexported", r"'reexported' in '.*reexport_mod.py' is not marked as a factory, so its module"),
+    ],
+)
+def test_an_imported_name_counts_only_if_it_is_marked_where_it_comes_from(tmp_path, monkeypatch, attr, match):
+    marker = tmp_path / "imported"
+    (tmp_path / "plain_source.py").write_text("def helper():\n    pass\n")
+    (tmp_path / "reexport_mod.py").write_text(
+        REEXPORT.format(marker=str(marker), target="plain_source", name="helper")
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(SpecError, match=match):
+        resolve_factory(f"reexport_mod:{attr}")
+    with pytest.raises(SpecError, match=match):
+        resolve_factory(f"{tmp_path / 'reexport_mod.py'}:{attr}")
+    assert not marker.exists()
+    assert "reexport_mod" not in sys.modules and "plain_source" not in sys.modules
+
+
+def test_antigravity_is_not_imported_through_a_name_it_imports():
+    # importing antigravity opens a web browser; it imports webbrowser and hashlib
+    for name in ("antigravity:webbrowser", "antigravity:hashlib"):
+        with pytest.raises(SpecError, match=r"'.*' in '.*antigravity.py' is not marked as a factory, so"):
+            resolve_factory(name)
+    assert "antigravity" not in sys.modules
+
+
+def test_a_marked_factory_may_be_imported_from_where_it_is_marked(tmp_path, monkeypatch):
+    # a package that re-exports its factory, absolutely and relatively, a chain of two
+    pkg = tmp_path / "reexport_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(
+        "from .models import problem\nfrom reexport_pkg.models import problem as p2\n"
+    )
+    (pkg / "models.py").write_text(MARKED)
+    (pkg / "outer.py").write_text("from . import problem\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for name in ("reexport_pkg:problem", "reexport_pkg:p2", "reexport_pkg.outer:problem"):
+        assert is_factory(resolve_factory(name))
+    # the name an already imported module gives is checked there
+    (tmp_path / "from_loaded.py").write_text("from etobs.examples.robot_arm import robot_arm\n")
+    assert is_factory(resolve_factory("from_loaded:robot_arm"))
+
+
+def test_a_file_factory_runs_its_file_once_and_may_hold_dataclasses(tmp_path):
+    counter = tmp_path / "runs"
+    path = tmp_path / "with_dataclass.py"
+    path.write_text(
+        "from __future__ import annotations\n"
+        "from dataclasses import dataclass\n"
+        "from pathlib import Path\n"
+        f"_c = Path({str(counter)!r})\n"
+        "_c.write_text(_c.read_text() + 'x' if _c.exists() else 'x')\n"
+        + MARKED
+        + "\n@dataclass\nclass Settings:\n    k: float = 1.0\n"
+    )
+    # make_problem resolved the factory twice, running the file twice; a dataclass broke it (AttributeError)
+    problem = make_problem(f"{path}:problem", {"noise": False}, "system.params")
+    assert isinstance(problem, EstimationProblem)
+    assert is_factory(resolve_factory(f"{path}:problem"))
+    assert counter.read_text() == "x"

@@ -6,14 +6,17 @@ or ``"path/to/file.py:function"``. The function must be marked with
 arguments, so ``factory = "subprocess:run"`` with ``args = [...]`` would run a command.
 
 A module or file that is not imported yet is read first, not run: unless it defines the
-function with the mark (or imports the name), it is refused without being imported, so
-a spec cannot run a module's import-time code either. Once imported, the mark itself is
-checked (by identity, :func:`etobs._spec.is_factory`).
+function with the mark, or imports it from a module that does (followed the same way), it
+is refused without being imported, so a spec cannot run a module's import-time code
+either. Once imported, the mark itself is checked (by identity,
+:func:`etobs._spec.is_factory`). A file is run once per process (it is kept in
+``sys.modules`` under a name made from its path).
 """
 
 from __future__ import annotations
 
 import ast
+import hashlib
 import importlib
 import importlib.machinery
 import importlib.util
@@ -35,6 +38,8 @@ REGISTRY: dict[str, Callable[..., EstimationProblem]] = {
     "robot_arm_network": robot_arm_network,
 }
 
+#: How many imports deep a re-exported factory is followed to where it is marked.
+MAX_REEXPORTS = 8
 #: The fix, in every refusal.
 _FIX = "mark it with @etobs.factory if a spec may call it (a spec names code: see docs/specs.md)"
 
@@ -115,18 +120,31 @@ def make_problem(factory: str, kwargs: dict[str, Any], where: str) -> Estimation
 
 
 def _load_file(name: str, where: str, attr: str) -> ModuleType:
-    """The module of ``path/file.py``, executed only if its source marks ``attr``."""
+    """The module of ``path/file.py``, executed (once per process) only if its source marks ``attr``.
+
+    It is kept in ``sys.modules`` under a name made from the file's path, size and time
+    of change, as an import would keep it: a second resolution (every command resolves its
+    factory more than once) does not run the file again, and code that looks its module
+    up there (dataclasses, pickle) works.
+    """
     path = Path(where)
     if not path.is_file():
         raise SpecError(f"`system.factory`: cannot import {where!r}: no such file")
-    _require_mark(name, path, attr)
-    loc = importlib.util.spec_from_file_location(path.stem, path)
+    st = path.stat()
+    ident = f"{path.resolve()}\0{st.st_size}\0{st.st_mtime_ns}"
+    module_name = f"_etobs_factory_file_{hashlib.sha256(ident.encode()).hexdigest()[:16]}"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    _require_mark(name, path, attr, None)
+    loc = importlib.util.spec_from_file_location(module_name, path)
     if loc is None or loc.loader is None:
         raise SpecError(f"`system.factory`: cannot import {where!r}: not a Python file")
     module = importlib.util.module_from_spec(loc)
+    sys.modules[module_name] = module
     try:
         loc.loader.exec_module(module)
     except Exception as exc:
+        del sys.modules[module_name]
         raise SpecError(f"`system.factory`: importing {where!r} failed: {type(exc).__name__}: {exc}") from exc
     return module
 
@@ -143,7 +161,7 @@ def _load_module(name: str, where: str, attr: str) -> ModuleType:
             f"`system.factory` = {name!r}: {where!r} has no Python source in which to look for "
             f"the mark, so it is not imported; {_FIX}"
         )
-    _require_mark(name, origin, attr)
+    _require_mark(name, origin, attr, _package_of(where, origin))
     try:
         return importlib.import_module(where)
     except Exception as exc:
@@ -174,21 +192,72 @@ def _source_of(module: str) -> Path | None:
     return Path(origin)
 
 
-def _require_mark(name: str, path: Path, attr: str) -> None:
-    """Refuse, before running ``path``, a source that does not define ``attr`` with the mark."""
+def _package_of(module: str, origin: Path) -> str:
+    """The package a relative import in ``module`` (source ``origin``) is resolved against."""
+    return module if origin.name == "__init__.py" else module.rpartition(".")[0]
+
+
+def _require_mark(name: str, path: Path, attr: str, package: str | None) -> None:
+    """Refuse, before running ``path``, a source that does not define ``attr`` with the mark.
+
+    ``package`` resolves relative imports (``None``: a file, which has none).
+    """
+    marked = _marked_in_source(path, attr, package, MAX_REEXPORTS)
+    if marked is None:
+        raise SpecError(f"`system.factory`: {str(path)!r} has no callable {attr!r}")
+    if not marked:
+        raise SpecError(
+            f"`system.factory` = {name!r}: {attr!r} in {str(path)!r} is not marked as a factory, "
+            f"so its module is not imported; {_FIX}"
+        )
+
+
+def _marked_in_source(path: Path, attr: str, package: str | None, depth: int) -> bool | None:
+    """Whether the source ``path`` defines ``attr`` with the mark; ``None``: it does not define it.
+
+    A name imported from another module counts only if that module marks it: its source
+    is read in turn (at most ``depth`` imports deep), or, if it is imported already, the
+    mark itself is checked. An imported module (``import webbrowser``) is not a factory:
+    it used to count, and naming it ran the importing module (``antigravity:webbrowser``
+    opened a web browser).
+    """
     try:
         tree = ast.parse(importlib.util.decode_source(path.read_bytes()), filename=str(path))
     except (OSError, SyntaxError, ValueError) as exc:
         raise SpecError(f"`system.factory`: cannot read {str(path)!r}: {exc}") from None
-    marks = [_marks(node, attr) for node in _top_level(tree.body)]
-    if True in marks:
-        return
-    if False not in marks:
-        raise SpecError(f"`system.factory`: {str(path)!r} has no callable {attr!r}")
-    raise SpecError(
-        f"`system.factory` = {name!r}: {attr!r} in {str(path)!r} is not marked as a factory, "
-        f"so its module is not imported; {_FIX}"
-    )
+    found = None
+    for node in _top_level(tree.body):
+        marked = _marks(node, attr)
+        if isinstance(marked, tuple):
+            marked = _marked_in_module(*marked, package, depth)
+        if marked:
+            return True
+        found = False if marked is False else found
+    return found
+
+
+def _marked_in_module(source: str, level: int, name: str, package: str | None, depth: int) -> bool:
+    """Whether ``name`` imported ``from source import name`` (``level`` dots) is a marked factory."""
+    if depth <= 0 or (level and not package):  # too long a chain; a relative import in a file
+        return False
+    try:
+        module = importlib.util.resolve_name("." * level + source, package) if level else source
+    except (ImportError, ValueError):
+        return False
+    if module in sys.modules:  # imported already: its name is checked, not its source
+        try:
+            return is_factory(getattr(sys.modules[module], name, None))
+        except Exception:  # a module __getattr__ that fails: not a factory
+            return False
+    if not all(part.isidentifier() for part in module.split(".")):
+        return False
+    try:
+        origin = _source_of(module)
+    except SpecError:
+        return False
+    if origin is None:
+        return False
+    return bool(_marked_in_source(origin, name, _package_of(module, origin), depth - 1))
 
 
 def _top_level(body: list[ast.stmt]) -> Iterator[ast.stmt]:
@@ -202,10 +271,11 @@ def _top_level(body: list[ast.stmt]) -> Iterator[ast.stmt]:
             yield from _top_level(blocks + [s for h in node.handlers for s in h.body])
 
 
-def _marks(node: ast.stmt, attr: str) -> bool | None:
+def _marks(node: ast.stmt, attr: str) -> bool | tuple[str, int, str] | None:
     """Whether ``node`` defines ``attr`` with the mark; ``None`` when it does not define it.
 
-    An import of ``attr`` counts as marked: the mark is checked once the module is imported.
+    ``from source import name as attr`` gives ``(source, level, name)``: whether it is
+    marked is decided where it comes from (:func:`_marked_in_module`).
     """
     if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef) and node.name == attr:
         return any(_is_mark(d) for d in node.decorator_list)
@@ -213,10 +283,14 @@ def _marks(node: ast.stmt, attr: str) -> bool | None:
         targets = node.targets if isinstance(node, ast.Assign) else [node.target]
         if any(isinstance(t, ast.Name) and t.id == attr for t in targets):
             return isinstance(node.value, ast.Call) and _is_mark(node.value.func)
-    if isinstance(node, ast.Import | ast.ImportFrom) and any(
-        (a.asname or a.name) == attr for a in node.names
+    if isinstance(node, ast.Import) and any(
+        (a.asname or a.name.partition(".")[0]) == attr for a in node.names
     ):
-        return True
+        return False  # a module is not a factory
+    if isinstance(node, ast.ImportFrom):
+        for a in node.names:
+            if (a.asname or a.name) == attr:
+                return (node.module or "", node.level, a.name)
     return None
 
 
