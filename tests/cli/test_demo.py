@@ -80,6 +80,14 @@ def test_demo_names_the_retired_numpy_backend(capsys):
         (["--t-end", "-1"], r"argument --t-end: must be a finite number > 0; got '-1'"),
         (["--t-end", "nan"], r"argument --t-end: must be a finite number > 0; got 'nan'"),
         (["--rtol", "1e400"], r"argument --rtol: must be a finite number > 0; got '1e400'"),
+        # a ValueError traceback from numpy, and 1e4 < --t-end < 1e300 filled the memory with the error grid
+        (
+            ["--t-end", "1e308"],
+            r"--t-end 1e\+308 s is too long for the 0.001-s error grid \(at most 1e\+07 points\)",
+        ),
+        (["--t-end", "1e5"], r"--t-end 100000 s is too long .*: use --t-end <= 10000"),
+        # a reversed window printed 'max |x - xhat| on [30, 20]: n/a' and exit 0
+        (["--window", "30,20"], r"--window 30,20: its start lies after its end"),
         (
             ["--backend", "rk4"],
             r"argument --backend: `--backend` must be one of \('auto', 'engine', 'scipy'\)",

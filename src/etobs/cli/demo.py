@@ -14,6 +14,7 @@ import numpy as np
 
 from etobs import __version__
 from etobs.cli._args import BACKEND_HELP, backend, folder, positive_float
+from etobs.errors import InputError
 from etobs.estimation import (
     max_estimation_error,
     min_inter_event_time,
@@ -21,6 +22,7 @@ from etobs.estimation import (
     transmission_counts,
 )
 from etobs.examples import X0_PAPER, robot_arm
+from etobs.experiments.common import MAX_GRID_POINTS
 from etobs.hybrid import SaveAt, SolverOptions
 
 #: The paper's measured minimum inter-event times (section 7), sensor 1 and sensor 2.
@@ -96,6 +98,14 @@ def _atomic_write(path: Path, data: bytes) -> None:
 
 def run_robot_arm(args: argparse.Namespace) -> int:
     """Run the case study; return the exit code (non-zero when the run failed)."""
+    if args.t_end / GRID_STEP > MAX_GRID_POINTS:  # the grid is built whole, before the run
+        raise InputError(
+            f"--t-end {args.t_end:g} s is too long for the {GRID_STEP:g}-s error grid (at most "
+            f"{MAX_GRID_POINTS:.0e} points): use --t-end <= {MAX_GRID_POINTS * GRID_STEP:g}"
+        )
+    lo, hi = args.window
+    if lo > hi:
+        raise InputError(f"--window {lo:g},{hi:g}: its start lies after its end")
     problem = robot_arm(noise=not args.no_noise, disturbance=not args.no_disturbance)
     grid = np.arange(0.0, args.t_end + GRID_STEP / 2, GRID_STEP)
     options = SolverOptions(rtol=args.rtol, atol=args.rtol)
@@ -107,8 +117,7 @@ def run_robot_arm(args: argparse.Namespace) -> int:
         save=SaveAt(steps=True, grid=grid),
         backend=args.backend,
     )
-    lo, hi = args.window
-    in_window = lo <= args.t_end and hi >= lo
+    in_window = lo <= args.t_end
     err = float(max_estimation_error(result, (lo, min(hi, args.t_end)))[0]) if in_window else None
     counts = transmission_counts(result)[0]
     mins = min_inter_event_time(result)[0]
