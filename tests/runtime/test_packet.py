@@ -268,3 +268,33 @@ def test_generated_packets_get_a_verdict_and_the_state_stays_finite(packets, now
     assert sum(core.counts.values()) == len(packets) + 2
     assert np.all(np.isfinite(core.z)) and core.status == "ok"
     json.dumps(core.snapshot(), allow_nan=False)
+
+
+def test_a_state_file_others_may_change_is_refused_and_the_service_writes_it_600(tmp_path):
+    """Whoever may write the high-water marks can lower them and let captured packets in again."""
+    import os
+
+    path = tmp_path / "service.state"
+    marks = HighWaterMarks(path)
+    core = _core(marks=marks)
+    assert core.receive(_pkt(0, 2, 0.01, 1.0), now=1.0) == "applied"
+    core.advance(0.05)
+    assert oct(path.stat().st_mode & 0o777) == "0o600"  # it was created with the umask's mode (0644)
+    from etobs.examples import robot_arm
+    from etobs.runtime.service import ObserverCore
+
+    os.chmod(path, 0o620)
+    with pytest.raises(
+        InputError, match=r"high-water marks '.*service.state' have mode 0620: .*run `chmod 600"
+    ):
+        ObserverCore(robot_arm(), KEYS, session=7.0, marks=marks)
+    os.chmod(path, 0o644)  # readable is fine: the marks are not secret
+    assert ObserverCore(robot_arm(), KEYS, session=7.0, marks=marks).snapshot()["last_seq"][0] == 2
+
+
+def test_the_server_token_must_be_bytes():
+    from etobs.runtime.server import ObserverServer
+
+    # a str token passed the length check, then hmac.compare_digest raised TypeError inside every request
+    with pytest.raises(InputError, match=r"`token` must be bytes; got str"):
+        ObserverServer(_core(), token="a string token of enough length")

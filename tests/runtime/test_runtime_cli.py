@@ -288,3 +288,31 @@ def test_ctrl_c_ends_a_process_with_its_state_and_no_traceback(tmp_path, command
             proc.communicate()
     assert proc.returncode == 130 and "Traceback" not in err and f"etobs {command}: interrupted" in err
     assert "transmissions" in json.loads(out.strip().splitlines()[-1])
+
+
+def test_a_secret_that_cannot_be_created_names_its_key(tmp_path, capsys):
+    spec = tmp_path / "deploy.toml"
+    (tmp_path / "afile").write_text("not a folder")
+    spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0).replace("secret.key", "afile/secret.key"))
+    # it printed 'etobs: error: .../afile: Not a directory', naming no key
+    _one_line_error(
+        capsys, ["serve", str(spec)], r"`runtime.secret_file` '.*afile/secret.key' cannot be created"
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--duration", "-1"], r"argument --duration: must be a finite number > 0; got '-1'"),
+        (["--time-scale", "0"], r"argument --time-scale: must be a finite number > 0; got '0'"),
+        (["--duration", "1e308"], r"--duration / `runtime.period` = .* samples; a simulated sensor"),
+    ],
+)
+def test_demo_live_arguments_are_checked_before_any_process_starts(tmp_path, capsys, argv, match):
+    """Each started the sensor processes first: three lines (theirs and the demo's), or an unnamed key."""
+    with pytest.raises(SystemExit) as info:
+        main(["demo", "live", "--out", str(tmp_path / "out"), *argv])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and len(err.strip().splitlines()) == 1, err
+    assert re.search(match, err), err
+    assert not (tmp_path / "out" / "deployment.toml").exists()

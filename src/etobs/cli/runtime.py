@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from etobs.cli._args import load_toml
+from etobs.cli._args import load_toml, positive_float
 from etobs.errors import InputError
 from etobs.runtime.deployment import Deployment, parse_deployment
 
@@ -90,9 +90,14 @@ def add_demo(cases: Any) -> None:
     p.add_argument(
         "--out", type=Path, default=Path("live-out"), help="output folder (secret, trace, summary)"
     )
-    p.add_argument("--duration", type=float, default=None, help="plant seconds (default: the spec's)")
     p.add_argument(
-        "--time-scale", type=float, default=None, help="speed-up over real time (default: the spec's)"
+        "--duration", type=positive_float, default=None, help="plant seconds (default: the spec's)"
+    )
+    p.add_argument(
+        "--time-scale",
+        type=positive_float,
+        default=None,
+        help="speed-up over real time (default: the spec's)",
     )
     p.set_defaults(func=run_demo_live)
 
@@ -106,6 +111,15 @@ def _seconds(text: str) -> float:
     if not 0 <= value <= 86400:
         raise argparse.ArgumentTypeError(f"must be a number of seconds in 0..86400; got {text!r}")
     return value
+
+
+def _check_samples(dep: Deployment, duration: str) -> None:
+    """Refuse a run whose simulated sensors would compute more than ``MAX_SIMULATED_SAMPLES``."""
+    if dep.duration / dep.period > MAX_SIMULATED_SAMPLES:
+        raise InputError(
+            f"{duration} / `runtime.period` = {dep.duration / dep.period:.3g} samples; a simulated "
+            f"sensor computes its plant's samples first, at most {MAX_SIMULATED_SAMPLES:.0e}"
+        )
 
 
 def _epoch(value: str | None, dep: Deployment) -> float:
@@ -211,11 +225,7 @@ def run_sensor(args: argparse.Namespace) -> int:
         raise InputError(f"--node must be in 0..{pb.n_nodes - 1}; got {args.node}")
     if dep.x0 is None:
         raise InputError("the spec has no [plant] x0: a simulated sensor needs the plant's initial state")
-    if dep.duration / dep.period > MAX_SIMULATED_SAMPLES:
-        raise InputError(
-            f"`runtime.duration` / `runtime.period` = {dep.duration / dep.period:.3g} samples; a simulated "
-            f"sensor computes its plant's samples first, at most {MAX_SIMULATED_SAMPLES:.0e}"
-        )
+    _check_samples(dep, "`runtime.duration`")
     outputs = list(pb.nodes[args.node].outputs)
     key = derive_key(dep.secret(), args.node)
     seq = SequenceStore(args.state or dep.secret_file.with_name(f"node{args.node}.seq"))
@@ -272,6 +282,8 @@ def run_demo_live(args: argparse.Namespace) -> int:
         http_port=0,
         host="127.0.0.1",
     )
+    # before any process starts: each would print its own error, then the demo its own
+    _check_samples(dep, "`runtime.duration`" if args.duration is None else "--duration")
     pb = dep.problem()
     keys = node_keys(dep.secret(create=True), range(pb.n_nodes))
     core = ObserverCore(pb, keys, dt=dep.dt, marks=HighWaterMarks(dep.marks_file), max_value=dep.max_value)
@@ -316,8 +328,12 @@ def run_demo_live(args: argparse.Namespace) -> int:
                         f"the sensor process of node {i} was not ready after {READY_TIMEOUT:g} s "
                         "(it computes its plant's samples first)"
                     ) from None
-                if line.strip() != "ready":
-                    raise InputError(f"the sensor process of node {i} failed to start (exit {p.poll()})")
+                if line.strip() != "ready":  # it printed its error; its status comes once it has exited
+                    try:
+                        code = await asyncio.to_thread(p.wait, 60)
+                    except subprocess.TimeoutExpired:
+                        code = None
+                    raise InputError(f"the sensor process of node {i} failed to start (exit {code})")
             srv.epoch = time.time() + 0.2
             for p in procs:
                 p.stdin.write(f"{srv.epoch!r}\n")  # type: ignore[union-attr]
@@ -346,6 +362,9 @@ def run_demo_live(args: argparse.Namespace) -> int:
             for p in procs:
                 if p.poll() is None:
                     p.kill()
+                for pipe in (p.stdin, p.stdout):  # not left for the garbage collector (ResourceWarning)
+                    if pipe is not None:
+                        pipe.close()
             await srv.close()
 
     snap, reports = asyncio.run(main())

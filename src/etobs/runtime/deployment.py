@@ -44,6 +44,9 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import make_problem
 from etobs.runtime.server import is_loopback
 
+#: Largest secret or token read: they are 32 and 43 bytes.
+MAX_SECRET_BYTES = 4096
+
 
 def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
     """The bytes of the secret file ``path`` (named ``key`` in errors), refused if others can read it.
@@ -55,20 +58,29 @@ def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
     if not path.exists():
         if create is None:
             raise SpecError(f"`{key}` {str(path)!r} does not exist; `etobs serve` creates it")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(create)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(create)
+        except OSError as exc:
+            raise SpecError(f"`{key}` {str(path)!r} cannot be created: {exc.strerror or exc}") from exc
     try:
-        mode = stat.S_IMODE(os.stat(path).st_mode)
-        if os.name == "posix" and mode & 0o077:
-            raise SpecError(
-                f"`{key}` {str(path)!r} has mode {mode:04o}: the group or others may read it; "
-                f"run `chmod 600 {path}`"
-            )
-        return path.read_bytes()
+        with open(path, "rb") as fh:  # the mode of the file that is read (no window to swap it)
+            mode = stat.S_IMODE(os.fstat(fh.fileno()).st_mode)
+            if os.name == "posix" and mode & 0o077:
+                raise SpecError(
+                    f"`{key}` {str(path)!r} has mode {mode:04o}: the group or others may read it; "
+                    f"run `chmod 600 {path}`"
+                )
+            data = fh.read(MAX_SECRET_BYTES + 1)
     except OSError as exc:
         raise SpecError(f"`{key}` {str(path)!r} cannot be read: {exc}") from exc
+    if len(data) > MAX_SECRET_BYTES:
+        raise SpecError(
+            f"`{key}` {str(path)!r} holds more than {MAX_SECRET_BYTES} bytes; is it the right file?"
+        )
+    return data
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,9 @@ temporary file, ``fsync``, :func:`os.replace`, ``fsync`` of the folder) *before*
 packets they cover are applied, so after a crash at any point no packet that acted on the
 estimate is accepted again. Each mark is stored with the id of the node's key
 (:func:`~etobs.runtime.packet.key_id`): marks of another key (the secret was rotated)
-mean nothing for the new one and are not loaded.
+mean nothing for the new one and are not loaded. The file is written with mode 600, and
+one that the group or others may write is refused: lowering a mark lets the packets
+above it in again.
 
 The file is JSON::
 
@@ -20,12 +22,15 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from collections.abc import Mapping
 from pathlib import Path
 
 from etobs.errors import InputError
 
 FORMAT = "etobs-high-water-marks"
+#: Largest state file read: a mark is about 60 bytes, and a deployment has at most 65,536 nodes.
+MAX_BYTES = 1 << 23
 
 
 class HighWaterMarks:
@@ -45,11 +50,18 @@ class HighWaterMarks:
     def load(self, key_ids: Mapping[int, str]) -> dict[int, int]:
         """The stored mark of each node whose key id is ``key_ids[node]`` (others: none)."""
         try:
-            text = self.path.read_text()
+            with open(self.path, "rb") as fh:
+                mode = stat.S_IMODE(os.fstat(fh.fileno()).st_mode)
+                text = fh.read(MAX_BYTES + 1).decode()
         except FileNotFoundError:
             return {}
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"cannot read the high-water marks {str(self.path)!r}: {exc}") from exc
+        if os.name == "posix" and mode & 0o022:
+            raise InputError(
+                f"the high-water marks {str(self.path)!r} have mode {mode:04o}: the group or others may "
+                f"change them, and lowered marks let captured packets in again; run `chmod 600 {self.path}`"
+            )
         try:
             raw = json.loads(text)
             if raw.get("format") != FORMAT or raw.get("version") != 1:
@@ -78,7 +90,9 @@ class HighWaterMarks:
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")  # per process
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            with open(tmp, "w") as fh:
+            # mode 600: whoever may write the marks may lower them (load refuses a file others may write)
+            with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w") as fh:
+                os.fchmod(fh.fileno(), 0o600)  # an old temporary file keeps its mode otherwise
                 json.dump(body, fh)
                 fh.flush()
                 os.fsync(fh.fileno())

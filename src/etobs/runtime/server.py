@@ -109,6 +109,8 @@ class ObserverServer:
                 raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
         if not (isinstance(hold_back, int | float) and math.isfinite(hold_back) and hold_back >= 0):
             raise InputError(f"`hold_back` must be a finite number >= 0; got {hold_back!r}")
+        if token is not None and not isinstance(token, bytes):
+            raise InputError(f"`token` must be bytes; got {type(token).__name__}")
         if token is not None and len(token) < 16:
             raise InputError(f"`token` must have at least 16 bytes; got {len(token)}")
         self.core, self.time_scale = core, time_scale
