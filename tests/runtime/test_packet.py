@@ -298,3 +298,38 @@ def test_the_server_token_must_be_bytes():
     # a str token passed the length check, then hmac.compare_digest raised TypeError inside every request
     with pytest.raises(InputError, match=r"`token` must be bytes; got str"):
         ObserverServer(_core(), token="a string token of enough length")
+
+
+@pytest.mark.parametrize(("dt", "scale"), [(1e-9, 1.0), (1e-3, 1e3)])
+def test_an_observer_step_the_service_cannot_keep_up_with_is_refused(dt, scale):
+    """runtime.dt = 1e-9 took eleven minutes of wall time for every 10-ms tick (the loop was blocked)."""
+    from etobs.examples import robot_arm
+    from etobs.runtime.server import ObserverServer
+    from etobs.runtime.service import ObserverCore
+
+    core = ObserverCore(robot_arm(), KEYS, dt=dt)
+    with pytest.raises(
+        InputError, match=r"time_scale / dt = .* steps per wall second; at most 1e\+05: use a larger"
+    ):
+        ObserverServer(core, time_scale=scale)
+
+
+def test_a_huge_message_from_another_thread_is_cut_before_it_waits_for_the_loop():
+    """An MQTT message may be 256 MiB; each waited whole in the event loop's queue."""
+    import asyncio
+
+    from etobs.runtime.server import ObserverServer
+
+    seen = []
+
+    async def main():
+        srv = ObserverServer(_core())
+        await srv.start("127.0.0.1", 0)
+        srv.receive = seen.append  # what waits in the loop's queue reaches this
+        await asyncio.to_thread(srv.feed, b"E" * 10**7)
+        await asyncio.sleep(0)
+        await srv.close()
+        return srv.core.receive(seen[0])
+
+    assert asyncio.run(main()) == "malformed"
+    assert [len(d) for d in seen] == [MAX_BYTES + 1]

@@ -133,6 +133,13 @@ LINEAR = 'factory = "tests.estimation.linear:factory"'
         ("", "", ["--epoch", "soon"], r"--epoch must be a time.time\(\) value .*; got 'soon'"),
         ("", "", ["--epoch", "99999999999"], r"--epoch 99999999999.0 lies .* s ahead .* at most 3600 s"),
         ("", "", ["--epoch", "1000"], r"--epoch 1000.0: that run ended .* s ago"),
+        # after the endpoints opened and the epoch was printed: three lines
+        (
+            "",
+            "",
+            ["--trace", "/nonexistent-etobs/t.jsonl"],
+            r"--trace '/nonexistent-etobs/t.jsonl' cannot be",
+        ),
         (
             '"127.0.0.1"',
             '"no.such.host.invalid"',
@@ -316,3 +323,10 @@ def test_demo_live_arguments_are_checked_before_any_process_starts(tmp_path, cap
     assert info.value.code == 2 and len(err.strip().splitlines()) == 1, err
     assert re.search(match, err), err
     assert not (tmp_path / "out" / "deployment.toml").exists()
+
+
+def test_serve_refuses_an_observer_step_it_cannot_keep_up_with(tmp_path, capsys):
+    _secret(tmp_path)
+    spec = tmp_path / "deploy.toml"
+    spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0).replace("[plant]", "dt = 1e-9\n[plant]"))
+    _one_line_error(capsys, ["serve", str(spec)], r"steps per wall second; .* `runtime.dt`")

@@ -82,7 +82,7 @@ class MqttReceiver:
         import threading
 
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=_client_id("observer"))
-        self.client.on_message = lambda c, u, msg: deliver(bytes(msg.payload))
+        self.client.on_message = lambda c, u, msg: deliver(msg.payload)  # bytes; deliver cuts it short
         acked = threading.Event()
         self.client.on_subscribe = lambda c, u, mid, codes, props: acked.set()
         # subscribe on every (re)connect: a broker does not keep a clean session's subscriptions

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
+from etobs.runtime.packet import MAX_BYTES
 from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
 
@@ -44,6 +45,11 @@ from etobs.runtime.service import ObserverCore
 HTTP_TIMEOUT = 2.0
 HTTP_MAX_CLIENTS = 32
 HTTP_MAX_HEADERS = 32
+#: Most observer steps per wall second (``time_scale / dt``). A step of the robot arm's
+#: observer takes about 70 us in Python, so this is several times more than a service
+#: keeps up with; ``runtime.dt = 1e-9`` (1e9 steps per second) blocked the service for
+#: eleven minutes in every 10-ms tick.
+MAX_STEP_RATE = 1e5
 #: Turns of the event loop spent reading waiting datagrams at the end of a run (a socket
 #: buffer holds a few thousand packets).
 DRAIN_TURNS = 100_000
@@ -109,6 +115,12 @@ class ObserverServer:
                 raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
         if not (isinstance(hold_back, int | float) and math.isfinite(hold_back) and hold_back >= 0):
             raise InputError(f"`hold_back` must be a finite number >= 0; got {hold_back!r}")
+        if time_scale / core.dt > MAX_STEP_RATE:
+            raise InputError(
+                f"the observer would take time_scale / dt = {time_scale:g} / {core.dt:g} = "
+                f"{time_scale / core.dt:.3g} steps per wall second; at most {MAX_STEP_RATE:.0e}: use a "
+                "larger `runtime.dt` or a smaller `runtime.time_scale`"
+            )
         if token is not None and not isinstance(token, bytes):
             raise InputError(f"`token` must be bytes; got {type(token).__name__}")
         if token is not None and len(token) < 16:
@@ -135,10 +147,15 @@ class ObserverServer:
             self.core.session = float(value)
 
     def feed(self, data: bytes) -> None:
-        """Hand a datagram to the observer from another thread (e.g. the MQTT client's)."""
+        """Hand a datagram to the observer from another thread (e.g. the MQTT client's).
+
+        What is longer than any packet is cut to one byte more than the largest (it is
+        still judged ``malformed``) before it waits for the event loop: an MQTT message
+        may be 256 MiB, and a flood of them would otherwise wait whole.
+        """
         assert self._loop is not None, "start() first"
         with contextlib.suppress(RuntimeError):  # the loop has closed: the service is done
-            self._loop.call_soon_threadsafe(self.receive, data)
+            self._loop.call_soon_threadsafe(self.receive, data[: MAX_BYTES + 1])
 
     def receive(self, data: bytes) -> str:
         """Judge one datagram now (on the event loop); return its verdict."""
