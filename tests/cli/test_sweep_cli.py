@@ -64,6 +64,11 @@ def test_sweep_command_failures_exit_non_zero(tmp_path, capsys):
     ("argv", "match"),
     [
         (["--workers", "0"], r"argument --workers: must be a positive integer; got '0'"),
+        # a typo (1000 for 10) spawned up to 1000 processes of ~140 MB each, as many as there were chunks
+        (
+            ["--workers", "1000"],
+            r"`workers` = 1000 is more than 4 per core of this machine's \d+ .*: at most \d+",
+        ),
         (["--executor", "serial", "--scheduler", "tcp://127.0.0.1:1"], r"--scheduler needs --executor dask"),
     ],
 )

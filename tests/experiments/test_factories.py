@@ -209,3 +209,20 @@ def test_a_file_factory_runs_its_file_once_and_may_hold_dataclasses(tmp_path):
     assert isinstance(problem, EstimationProblem)
     assert is_factory(resolve_factory(f"{path}:problem"))
     assert counter.read_text() == "x"
+
+
+def test_a_module_attribute_lookup_that_fails_is_a_spec_error(tmp_path, monkeypatch):
+    # a module imported already whose __getattr__ (a lazy import, say) raises: it was a traceback
+    (tmp_path / "lazy_mod.py").write_text(
+        "def __getattr__(name):\n    raise RuntimeError('lazy import failed')\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import lazy_mod  # noqa: F401
+
+    try:
+        with pytest.raises(
+            SpecError, match=r"looking up 'maker' in 'lazy_mod' failed: RuntimeError: lazy import"
+        ):
+            resolve_factory("lazy_mod:maker")
+    finally:
+        del sys.modules["lazy_mod"]

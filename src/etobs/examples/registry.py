@@ -62,7 +62,12 @@ def resolve_factory(name: str) -> Callable[..., EstimationProblem]:
             "nor of the form 'package.module:function' or 'path/file.py:function'"
         )
     module = _load_file(name, where, attr) if where.endswith(".py") else _load_module(name, where, attr)
-    fn = getattr(module, attr, None)
+    try:  # a module's __getattr__ runs code (e.g. a lazy import) that may fail
+        fn = getattr(module, attr, None)
+    except Exception as exc:
+        raise SpecError(
+            f"`system.factory`: looking up {attr!r} in {where!r} failed: {type(exc).__name__}: {exc}"
+        ) from None
     if not callable(fn):
         raise SpecError(f"`system.factory`: {where!r} has no callable {attr!r}")
     if not is_factory(fn):

@@ -57,12 +57,24 @@ def execute(
         _dask(tasks, job, on_done, on_error, scheduler, client)
 
 
+#: Local worker processes per core at most: the runs are CPU-bound, so more only costs
+#: memory (``--workers 1000``, a typo, started a process per chunk up to 1000).
+MAX_WORKERS_PER_CORE = 4
+
+
 def check_execution(executor: str, workers: int | None) -> None:
     """Fail, naming the argument, on an unknown executor or a bad number of workers."""
     if executor not in EXECUTORS:
         raise InputError(f"`executor` must be one of {EXECUTORS}; got {executor!r}")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise InputError(f"`workers` must be a positive integer; got {workers!r}")
+    cores = os.cpu_count() or 1
+    if workers is not None and executor == "process" and workers > MAX_WORKERS_PER_CORE * cores:
+        raise InputError(
+            f"`workers` = {workers} is more than {MAX_WORKERS_PER_CORE} per core of this machine's {cores} "
+            f"(each is a process of about 140 MB, and runs use one core each): at most "
+            f"{MAX_WORKERS_PER_CORE * cores}"
+        )
 
 
 def _serial(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed) -> None:
