@@ -333,3 +333,33 @@ def test_a_huge_message_from_another_thread_is_cut_before_it_waits_for_the_loop(
 
     assert asyncio.run(main()) == "malformed"
     assert [len(d) for d in seen] == [MAX_BYTES + 1]
+
+
+def test_a_service_started_long_after_its_epoch_writes_a_bounded_trace(tmp_path, monkeypatch):
+    """serve --epoch 1 with a long duration wrote every 10-ms line since 1970 before anything else (hung)."""
+    import asyncio
+    import time
+
+    from etobs.runtime import server
+    from etobs.runtime.server import ObserverServer
+
+    monkeypatch.setattr(server, "MAX_BACKFILL_LINES", 10)
+    trace = tmp_path / "trace.jsonl"
+
+    async def main():
+        from etobs.examples import robot_arm
+        from etobs.runtime.service import ObserverCore
+
+        # no packets: the observer waits (a ready one would integrate the 1000 s)
+        core = ObserverCore(robot_arm(), KEYS)
+        srv = ObserverServer(core, tick=1.0, time_scale=10.0, hold_back=0.0, trace=trace)
+        srv.epoch = time.time() - 100.0  # service time 1000 s, 1000 lines behind
+        await srv.start("127.0.0.1", 0)
+        try:
+            return await srv.run_until(srv.now() + 1.0)  # a tenth of a second of wall time
+        finally:
+            await srv.close()
+
+    snap = asyncio.run(main())
+    t = [json.loads(line)["t"] for line in trace.read_text().splitlines()]
+    assert 12 <= len(t) <= 14 and 985.0 <= t[0] <= 991.0 and t[-1] == snap["t"]

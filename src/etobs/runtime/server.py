@@ -50,6 +50,9 @@ HTTP_MAX_HEADERS = 32
 #: keeps up with; ``runtime.dt = 1e-9`` (1e9 steps per second) blocked the service for
 #: eleven minutes in every 10-ms tick.
 MAX_STEP_RATE = 1e5
+#: Trace lines at most written for the time before a run starts (1000 s at the 10-ms tick):
+#: a service started on an old epoch does not write every line since it first.
+MAX_BACKFILL_LINES = 100_000
 #: Turns of the event loop spent reading waiting datagrams at the end of a run (a socket
 #: buffer holds a few thousand packets).
 DRAIN_TURNS = 100_000
@@ -217,7 +220,9 @@ class ObserverServer:
         check_epoch(self.epoch, t_end, self.time_scale, time.time())
         fh = open(self.trace_path, "w") if self.trace_path is not None else None
         give_up = self.epoch + t_end / self.time_scale + linger
-        k = 0  # the next trace line is at k * tick
+        # the next trace line is at k * tick: from 0, or at most MAX_BACKFILL_LINES before now for
+        # a service started long after its epoch (`serve --epoch 1` wrote every line since 1970 first)
+        k = max(0, math.floor((self.now() - self.hold_back) / self.tick) - MAX_BACKFILL_LINES)
         try:
             while True:
                 done = finished is None or finished() or time.time() > give_up
