@@ -15,6 +15,7 @@ import struct
 import numpy as np
 import pytest
 
+from etobs.errors import InputError
 from etobs.examples import robot_arm
 from etobs.runtime.marks import HighWaterMarks
 from etobs.runtime.packet import MAX_BYTES, Packet, decode, derive_key, encode
@@ -218,6 +219,12 @@ def test_a_restarted_sensor_resumes_above_its_old_sequence_numbers(tmp_path):
     with pytest.raises(ValueError, match=r"sequence file .* is damaged"):
         (tmp_path / "big.seq").write_text(str(2**64))
         SequenceStore(tmp_path / "big.seq")
+    # non-UTF-8 bytes were a UnicodeDecodeError traceback, and a file without end was read whole
+    (tmp_path / "binary.seq").write_bytes(b"\xff\xfe12")
+    with pytest.raises(InputError, match=r"sequence file .*binary.seq is damaged: '.*12'"):
+        SequenceStore(tmp_path / "binary.seq")
+    with pytest.raises(InputError, match=r"sequence file /dev/zero is damaged"):
+        SequenceStore("/dev/zero")
 
 
 def test_a_genuine_packet_lost_in_a_flood_is_counted_as_a_gap():

@@ -72,8 +72,9 @@ class SequenceStore:
         self.block = block
         self._next = 1
         if self.path is not None and self.path.exists():
-            text = self.path.read_text().strip()
-            if not text.isdigit() or int(text) >= 2**64:
+            with open(self.path, "rb") as fh:  # 20 digits at most: a file without end is not read whole
+                text = fh.read(64).decode("utf-8", errors="replace").strip()
+            if not (text.isascii() and text.isdigit()) or int(text) >= 2**64:
                 raise InputError(
                     f"sequence file {self.path} is damaged: {text[:40]!r}; remove it only if the key changes"
                 )
