@@ -53,6 +53,13 @@ def test_split_constants_are_checked():
         quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.5, c=[0.3, 0.3])
     with pytest.raises(InputError, match=r"`c` must have one constant per node \(2\); got 1"):
         quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=[0.1])
+    # a number raised TypeError: 'float' object is not iterable (issue 15)
+    with pytest.raises(
+        InputError,
+        match=r"`c` must be a sequence with one constant per node \(2\); got the number 0.1: "
+        r"write c=\[0.1, 0.1\] for 0.1 on every node",
+    ):
+        quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=0.1)
     with pytest.raises(InputError, match=r"`c\[1\]` must be > 0; got 0"):
         quadratic_iss_gains(GAIN, [[0], [1]], c_v=0.1, c=[0.1, 0.0])
     with pytest.raises(InputError, match=r"`nodes\[1\]` must list output indices in 0..1; got \[2\]"):

@@ -83,7 +83,8 @@ def quadratic_iss_gains(
     c_v : float
         Share of ``lambda_min(Q)`` spent on the disturbance ``v`` (> 0).
     c : sequence of float
-        Share spent on each node's network-induced error (> 0 each).
+        Share spent on each node's network-induced error (> 0 each), one per node; a
+        single number is refused (it could mean each node's share or their sum).
 
     Raises
     ------
@@ -108,6 +109,11 @@ def quadratic_iss_gains(
             f"`gain` does not pass its LMI re-check ({'; '.join(gain.notes) or 'residuals > 0'})"
         )
     v.real("c_v", c_v, lower=0.0, lower_open=True)
+    if isinstance(c, int | float | np.number):  # a number is ambiguous: on each node, or the sum?
+        raise InputError(
+            f"`c` must be a sequence with one constant per node ({len(nodes)}); got the number {c!r}: "
+            f"write c={[c] * len(nodes)!r} for {c!r} on every node"
+        )
     cs = [v.real(f"c[{i}]", ci, lower=0.0, lower_open=True) for i, ci in enumerate(c)]
     if len(cs) != len(nodes):
         raise InputError(f"`c` must have one constant per node ({len(nodes)}); got {len(cs)}")
