@@ -1,0 +1,58 @@
+"""Progress bars for long work (simulate batches, sweeps, comparisons, rate estimates).
+
+One place decides how progress is shown: a `tqdm <https://tqdm.github.io>`_ bar on
+stderr, on by default only when stderr is a terminal, and drawn only after the work has
+taken :data:`DELAY` seconds (a short call prints nothing). Callers pass ``enabled``:
+``None`` for that default, ``True`` or ``False`` to force it.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+#: Seconds before a bar first appears: work shorter than this shows nothing.
+DELAY = 1.0
+
+
+def progress_bar(total: int, desc: str, *, enabled: bool | None = None, unit: str = "run") -> Any:
+    """A tqdm bar on stderr counting ``total`` units of work.
+
+    Parameters
+    ----------
+    total : int
+        Units of work (runs, grid points, samples).
+    desc : str
+        What the work is, shown before the bar.
+    enabled : bool or None
+        ``None``: shown when stderr is a terminal; ``True``/``False``: forced.
+    unit : str
+        Name of one unit.
+
+    Returns
+    -------
+    tqdm.tqdm
+        Use ``bar.update(n)`` and ``bar.close()`` (or ``with``). When disabled every call
+        is a no-op.
+
+    Examples
+    --------
+    >>> with progress_bar(3, "runs", enabled=False) as bar:
+    ...     bar.update(3)
+    >>> bar.disable
+    True
+
+    """
+    from tqdm import tqdm
+
+    show = sys.stderr.isatty() if enabled is None else bool(enabled)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        disable=not show,
+        delay=0.0 if enabled else DELAY,
+        dynamic_ncols=True,
+        leave=True,
+    )
