@@ -11,12 +11,13 @@ cannot call ``subprocess:run`` or any other function that was not written to be 
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import math
 import os
 import stat
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -37,6 +38,11 @@ MAX_SPEC_BYTES = 1 << 20
 #: ``networks[1].delay.uniform[0]``); deeper nesting reached Python's recursion limit
 #: inside the TOML parser.
 MAX_DEPTH = 16
+
+#: What ``system.factory`` expects, in every format's missing-key error.
+FACTORY = "a string: a registered example, 'package.module:function' or 'path/file.py:function'"
+#: What a required table expects.
+TABLE = "a table"
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 #: The mark :func:`factory` sets; compared by identity, so no other object can fake it.
@@ -158,18 +164,53 @@ def check_tree(raw: Any, name: str | None = None) -> None:
             )
 
 
-def keys(where: str, table: Any, required: set[str], optional: set[str]) -> dict[str, Any]:
-    """``table`` after checking it is a table with the required keys and no others."""
+def keys(
+    where: str, table: Any, required: Mapping[str, str] | set[str], optional: Iterable[str]
+) -> dict[str, Any]:
+    """``table`` after checking it is a table with the required keys and no others.
+
+    ``required`` maps each required key to what it expects (``"a number > 0"``), which a
+    missing key's error states; the keys of every format are listed in ``docs/specs.md``.
+    """
     if not isinstance(table, dict):
-        raise SpecError(f"`{where}` must be a table; got {type(table).__name__}")
-    unknown = sorted(set(table) - required - optional)
+        raise SpecError(f"`{where}` must be a table; got {shown(table)} ({type(table).__name__})")
+    unknown = sorted(set(table) - set(required) - set(optional))
     if unknown:
-        allowed = ", ".join(sorted(required | optional))
+        allowed = ", ".join(sorted(set(required) | set(optional)))
         raise SpecError(f"unknown key `{where}.{unknown[0]}`; allowed keys of `{where}`: {allowed}")
-    missing = sorted(required - set(table))
+    missing = sorted(set(required) - set(table))
     if missing:
-        raise SpecError(f"missing key `{where}.{missing[0]}`")
+        expected = required.get(missing[0]) if isinstance(required, Mapping) else None
+        what = f": expected {expected}" if expected else ""
+        raise SpecError(f"missing key `{where}.{missing[0]}`{what}; `{where}` has {_listed(table)}")
     return table
+
+
+def _listed(table: dict[str, Any]) -> str:
+    """The keys a table has, for a missing key's error."""
+    if not table:
+        return "no keys"
+    return "keys " + ", ".join(sorted(map(str, table))) if len(table) <= 12 else f"{len(table)} other keys"
+
+
+def name(key: str, value: Any) -> str:
+    """``value`` after checking it is a name: letters, digits, ``_`` or ``-`` (file and topic safe)."""
+    if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
+        raise SpecError(
+            f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {shown(value)}"
+        )
+    return value
+
+
+@contextlib.contextmanager
+def in_file(path: str | Path) -> Iterator[None]:
+    """Name the spec file ``path`` in a :class:`SpecError` raised inside, unless it names it."""
+    try:
+        yield
+    except SpecError as exc:
+        if str(path) in str(exc):
+            raise
+        raise SpecError(f"{path}: {exc}") from exc
 
 
 def number(

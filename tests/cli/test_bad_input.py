@@ -145,7 +145,10 @@ def test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it(tmp_path, cap
     assert code == 1
     err = capsys.readouterr().err
     assert "Traceback" not in err
-    assert re.search(r"failed: runs 0..0 .*SpecError: row 0, scenario 'default': `sigma` must be a real", err)
+    assert re.search(
+        r"failed: runs 0..0 .*SpecError: `system.fixed.sigma` \(row 0, scenario 'default'\): `sigma` must be a real",
+        err,
+    )
 
 
 @pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")

@@ -86,7 +86,9 @@ def test_bad_spec_is_one_clear_line(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         main(["sweep", str(spec)])
     assert info.value.code == 2
-    assert capsys.readouterr().err.strip() == f"etobs: error: {spec}: missing key `spec.initial_states`"
+    assert capsys.readouterr().err.strip() == (
+        f"etobs: error: {spec}: missing key `spec.initial_states`: expected a table; `spec` has keys horizon, system"
+    )
 
 
 def test_table1_comparison_columns_and_statistics():

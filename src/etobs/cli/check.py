@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs._spec import SpecError
+from etobs._spec import FACTORY, TABLE, SpecError
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
@@ -61,11 +61,11 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build the problem and the ISS gains of the spec, certify, print; 1 if a condition fails."""
     raw = _load(args.spec)
-    top = _keys("spec", raw, {"system"}, {"observer", "guarantees", "name"})
-    system = _keys("system", top["system"], {"factory"}, {"params"})
+    top = _keys("spec", raw, {"system": TABLE}, {"observer", "guarantees", "name"})
+    system = _keys("system", top["system"], {"factory": FACTORY}, {"params"})
     params = system.get("params", {})
     if not isinstance(params, dict):
-        raise SpecError(f"`system.params` must be a table; got {type(params).__name__}")
+        raise SpecError(f"`system.params` must be a table; got {shown(params)}")
     problem = make_problem(system["factory"], params, "system.params")
     iss = None
     if "observer" in top:
@@ -93,6 +93,8 @@ def _certify(problem: Any, iss: Any, g: dict[str, Any]) -> Any:
     """The certificate of ``problem`` with the ``[guarantees]`` table ``g``."""
     from etobs.design import certify
 
+    if "E_estimate" in g and "E" in g:  # one would be ignored
+        raise SpecError("give either `guarantees.E` or `guarantees.E_estimate`, not both")
     if "E_estimate" in g:
         E: Any = _estimate(problem, g["E_estimate"])
     elif isinstance(g.get("E"), list):
@@ -130,7 +132,12 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
 
     keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q"}
-    obs = _keys("observer", table, {"L", "c_v", "c"}, keys - {"L", "c_v", "c"})
+    needed = {
+        "L": "'design', 'paper' or a matrix",
+        "c_v": "a number > 0",
+        "c": "a list of numbers (one per node)",
+    }
+    obs = _keys("observer", table, needed, keys - set(needed))
     if "structure" in obs:
         structure = _STRUCTURES.get(obs["structure"]) if isinstance(obs["structure"], str) else None
         if structure is None:
@@ -194,7 +201,8 @@ def _estimate(problem: Any, table: Any) -> list[float]:
     """``E`` per node: the largest ``|dy_i/dt|`` on seeded runs from a box, times a margin."""
     from etobs.design.rates import estimate_output_rate
 
-    t = _keys("guarantees.E_estimate", table, {"low", "high"}, {"runs", "t_end", "seed", "margin"})
+    box = "a list of numbers (one per plant state)"
+    t = _keys("guarantees.E_estimate", table, {"low": box, "high": box}, {"runs", "t_end", "seed", "margin"})
     low, high = (v.vector(f"guarantees.E_estimate.{k}", t[k]) for k in ("low", "high"))
     if low.shape != (problem.plant.n_x,) or high.shape != low.shape or np.any(high < low):
         raise SpecError(

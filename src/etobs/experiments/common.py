@@ -36,8 +36,9 @@ from typing import Any, Self
 
 import numpy as np
 
-from etobs._spec import SpecError
+from etobs._spec import FACTORY, TABLE, SpecError
 from etobs._spec import keys as _keys
+from etobs._spec import name as _name
 from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.errors import EtobsError
@@ -216,15 +217,13 @@ def parse_common(top: dict[str, Any], *, default_name: str, kwargs_key: str) -> 
     ``kwargs_key`` names the ``[system]`` table of factory arguments (``fixed`` in a
     sweep, ``params`` in a comparison); it is returned under ``"kwargs"``.
     """
-    system = _keys("system", top["system"], {"factory"}, {kwargs_key})
+    system = _keys("system", top["system"], {"factory": FACTORY}, {kwargs_key})
     if not isinstance(system["factory"], str):
         raise SpecError(f"`system.factory` must be a string; got {shown(system['factory'])}")
     kwargs = system.get(kwargs_key, {})
     if not isinstance(kwargs, dict):
-        raise SpecError(
-            f"`system.{kwargs_key}` must be a table of keyword arguments; got {type(kwargs).__name__}"
-        )
-    hor = _keys("horizon", top["horizon"], {"t_end"}, set())
+        raise SpecError(f"`system.{kwargs_key}` must be a table of keyword arguments; got {shown(kwargs)}")
+    hor = _keys("horizon", top["horizon"], {"t_end": "a number > 0"}, set())
     t_end = float(_number("horizon.t_end", hor["t_end"], lower=0.0, strict=True))
     execution = _keys("execution", top.get("execution", {}), set(), {"chunk_size", "backend"})
     chunk = execution.get("chunk_size", DEFAULT_CHUNK)
@@ -242,7 +241,10 @@ def parse_common(top: dict[str, Any], *, default_name: str, kwargs_key: str) -> 
 
 
 #: Top-level keys :func:`parse_common` reads (required, optional).
-COMMON_KEYS = ({"system", "initial_states", "horizon"}, {"name", "metrics", "solver", "execution"})
+COMMON_KEYS = (
+    {"system": TABLE, "initial_states": TABLE, "horizon": TABLE},
+    {"name", "metrics", "solver", "execution"},
+)
 
 
 def normalize(obj: Any, *, ints_as_floats: bool = True) -> Any:
@@ -261,14 +263,6 @@ def normalize(obj: Any, *, ints_as_floats: bool = True) -> Any:
     if ints_as_floats and isinstance(obj, int) and not isinstance(obj, bool):
         return float(obj)
     return obj
-
-
-def _name(key: str, value: Any) -> str:
-    if not isinstance(value, str) or not value or not all(c.isalnum() or c in "_-" for c in value):
-        raise SpecError(
-            f"`{key}` must be a non-empty name of letters, digits, '_' or '-'; got {shown(value)}"
-        )
-    return value
 
 
 def _pair(key: str, value: Any) -> tuple[float, float]:
@@ -297,7 +291,13 @@ def parse_backend(value: Any) -> str:
 
 def parse_initial_states(table: Any) -> InitialStates:
     """Validate ``[initial_states]``: ``low``, ``high``, ``runs``, ``seed``."""
-    ini = _keys("initial_states", table, {"low", "high", "runs", "seed"}, set())
+    box = "a non-empty list of numbers (one per plant state)"
+    ini = _keys(
+        "initial_states",
+        table,
+        {"low": box, "high": box, "runs": "an integer >= 1", "seed": "an integer >= 0"},
+        set(),
+    )
     for k in ("low", "high"):
         if not isinstance(ini[k], list) or not ini[k]:
             raise SpecError(f"`initial_states.{k}` must be a non-empty list of numbers; got {shown(ini[k])}")

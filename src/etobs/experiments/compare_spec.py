@@ -87,6 +87,12 @@ RULE_KINDS: dict[str, tuple[str, ...]] = {
     "send_on_delta": ("delta",),
 }
 
+#: Keys a rule kind requires (besides ``name`` and ``kind``).
+_REQUIRED = {"periodic": ("period",), "relative": ("rho", "eps"), "send_on_delta": ("delta",)}
+#: What an entry's name and a rule's number expect, in a missing key's error.
+_NAME = "a non-empty string"
+_PER_NODE = "a number (every node) or a list of numbers (one per node)"
+
 
 @dataclass(frozen=True)
 class RuleEntry:
@@ -253,7 +259,8 @@ def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
     """Validate a comparison spec given as a dictionary (the parsed TOML)."""
     check_tree(raw)
     required, optional = COMMON_KEYS
-    top = _keys("spec", raw, required | {"rules"}, optional | {"networks"})
+    rules = "a non-empty array of tables ([[rules]])"
+    top = _keys("spec", raw, {**required, "rules": rules}, optional | {"networks"})
     common = parse_common(top, default_name="compare", kwargs_key="params")
     params = common.pop("kwargs")
     rules = _list("rules", top["rules"], _rule)
@@ -286,9 +293,7 @@ def _rule(where: str, table: Any) -> RuleEntry:
     kind = table.get("kind")
     if not isinstance(kind, str) or kind not in RULE_KINDS:
         raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {shown(kind)}")
-    required = {"name", "kind"} | ({"period"} if kind == "periodic" else set())
-    required |= {"rho", "eps"} if kind == "relative" else set()
-    required |= {"delta"} if kind == "send_on_delta" else set()
+    required = {"name": _NAME, "kind": "a rule kind"} | {k: _PER_NODE for k in _REQUIRED.get(kind, ())}
     t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy"})
     copy = t.get("observer_copy", False)
     if not isinstance(copy, bool):
@@ -301,7 +306,7 @@ def _rule(where: str, table: Any) -> RuleEntry:
 
 
 def _network(where: str, table: Any) -> NetworkEntry:
-    t = _keys(where, table, {"name"}, {"delay", "loss", "capacity", "seed"})
+    t = _keys(where, table, {"name": _NAME}, {"delay", "loss", "capacity", "seed"})
     name = _entry_name(where, t)
     if set(t) == {"name"}:
         return NetworkEntry(name, None)
@@ -335,7 +340,9 @@ def _loss(where: str, value: Any) -> float | Loss | None:
         return None
     if not isinstance(value, dict):
         return float(_number(where, value, lower=0.0))
-    t = _keys(where, value, {"gilbert_elliott"}, set())
+    t = _keys(
+        where, value, {"gilbert_elliott": "a list of 4 numbers [p_gb, p_bg, loss_good, loss_bad]"}, set()
+    )
     return GilbertElliottLoss(*_numbers(f"{where}.gilbert_elliott", t["gilbert_elliott"], 4))
 
 

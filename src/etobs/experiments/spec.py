@@ -38,15 +38,18 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError, check_tree, read_toml
+from etobs._spec import SpecError, check_tree, in_file, read_toml
 from etobs._spec import keys as _keys
+from etobs._spec import name as _name
 from etobs._validate import shown
+from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
-from etobs.experiments.common import COMMON_KEYS, Experiment, _name, check_size, normalize, parse_common
+from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build, check_arguments
 
 #: Columns of the result tables; a parameter may not take one of these names.
@@ -112,8 +115,33 @@ class SweepSpec(Experiment):
         return f"row {r}, scenario {self.scenarios[s].name!r}"
 
     def problem(self, group: int) -> EstimationProblem:
-        """The factory called with :meth:`kwargs`."""
-        return build(self.factory, self.kwargs(group), len(self.initial_states.low), self.where(group))
+        """The factory called with :meth:`kwargs`.
+
+        An error the factory raises about one of its arguments (a message that starts
+        with the argument's name in backquotes, as etobs's checks write it) names the
+        spec key that gave it, e.g. ``rows[2].sigma``.
+        """
+        kwargs = self.kwargs(group)
+        try:
+            return build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
+        except SpecError as exc:
+            cause = exc.__cause__
+            named = re.match(r"`(\w+)`", str(cause)) if isinstance(cause, EtobsError) else None
+            if named is None or named[1] not in kwargs or isinstance(cause, SpecError):
+                raise
+            raise SpecError(f"`{self.origin(group, named[1])}` ({self.where(group)}): {cause}") from cause
+
+    def origin(self, group: int, key: str) -> str:
+        """The spec key that gives the factory's argument ``key`` in ``group``.
+
+        A scenario's value wins over a row's, and a row's over ``system.fixed``'s.
+        """
+        r, s = self.row_scenario(group)
+        if key in self.scenarios[s].params:
+            return f"scenarios[{s}].{key}"
+        if key in self.rows[r]:
+            return f"grid.{key}" if "grid" in self.raw else f"rows[{r}].{key}"
+        return f"system.fixed.{key}"
 
     def resolved(self) -> dict[str, Any]:
         """The common settings, the fixed arguments, the rows and the scenarios."""
@@ -126,8 +154,12 @@ class SweepSpec(Experiment):
 
 
 def load_spec(path: str | Path) -> SweepSpec:
-    """Read (at most 1 MiB, :func:`etobs._spec.read_toml`) and validate a TOML sweep spec."""
-    return parse_spec(read_toml(path))
+    """Read (at most 1 MiB, :func:`etobs._spec.read_toml`) and validate a TOML sweep spec.
+
+    An error names the file, the key and what it expects (the keys: ``docs/specs.md``).
+    """
+    with in_file(path):
+        return parse_spec(read_toml(path))
 
 
 def parse_spec(raw: dict[str, Any]) -> SweepSpec:
@@ -150,7 +182,10 @@ def _rows(top: dict[str, Any], scenarios: int, runs: int) -> tuple[dict[str, Any
     if "grid" in top:
         grid = top["grid"]
         if not isinstance(grid, dict) or not grid:
-            raise SpecError("`grid` must be a table mapping each parameter to a list of values")
+            raise SpecError(
+                "`grid` must be a non-empty table mapping each parameter to a list of values; "
+                f"got {shown(grid)}"
+            )
         for k, vals in grid.items():
             if not isinstance(vals, list) or not vals:
                 raise SpecError(f"`grid.{k}` must be a non-empty list of values; got {shown(vals)}")
@@ -159,18 +194,22 @@ def _rows(top: dict[str, Any], scenarios: int, runs: int) -> tuple[dict[str, Any
         return tuple(dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values()))
     rows = top.get("rows", [{}])
     if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
-        raise SpecError("`rows` must be a non-empty array of tables ([[rows]])")
+        raise SpecError(f"`rows` must be a non-empty array of tables ([[rows]]); got {shown(rows)}")
     check_size(len(rows) * scenarios, runs, "`rows` x `scenarios`")
     return tuple(dict(r) for r in rows)
 
 
 def _scenarios(items: Any) -> tuple[Scenario, ...]:
     if not isinstance(items, list) or not items or not all(isinstance(s, dict) for s in items):
-        raise SpecError("`scenarios` must be a non-empty array of tables ([[scenarios]])")
+        raise SpecError(
+            f"`scenarios` must be a non-empty array of tables ([[scenarios]]); got {shown(items)}"
+        )
     out, seen = [], set()
     for i, s in enumerate(items):
-        if "name" not in s:
-            raise SpecError(f"missing key `scenarios[{i}].name`")
+        if "name" not in s:  # the other keys are the factory's arguments
+            raise SpecError(
+                f"missing key `scenarios[{i}].name`: expected a name of letters, digits, '_' or '-'"
+            )
         nm = _name(f"scenarios[{i}].name", s["name"])
         if nm in seen:
             raise SpecError(f"`scenarios[{i}].name` repeats {nm!r}")

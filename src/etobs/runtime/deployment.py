@@ -37,9 +37,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError
+from etobs._spec import FACTORY, TABLE, SpecError
 from etobs._spec import keys as _keys
+from etobs._spec import name as _name
 from etobs._spec import number as _number
+from etobs._validate import shown
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import make_problem
 from etobs.runtime.server import is_loopback
@@ -158,15 +160,15 @@ class Deployment:
 
 def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
     """Validate a deployment spec (the parsed TOML); relative paths are taken from ``base``."""
-    top = _keys("spec", raw, {"system", "runtime"}, {"name", "plant"})
-    system = _keys("system", top["system"], {"factory"}, {"params"})
+    top = _keys("spec", raw, {"system": TABLE, "runtime": TABLE}, {"name", "plant"})
+    system = _keys("system", top["system"], {"factory": FACTORY}, {"params"})
     params = system.get("params", {})
     if not isinstance(params, dict):
-        raise SpecError("`system.params` must be a table of keyword arguments")
+        raise SpecError(f"`system.params` must be a table of keyword arguments; got {shown(params)}")
     rt = _keys(
         "runtime",
         top["runtime"],
-        {"period", "duration"},
+        {"period": "a number > 0 (s)", "duration": "a number > 0 (s)"},
         {
             "time_scale",
             "host",
@@ -186,18 +188,22 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
     )
     transport = rt.get("transport", "udp")
     if transport not in ("udp", "mqtt"):
-        raise SpecError(f"`runtime.transport` must be 'udp' or 'mqtt'; got {transport!r}")
+        raise SpecError(f"`runtime.transport` must be 'udp' or 'mqtt'; got {shown(transport)}")
     broker = rt.get("broker", "127.0.0.1:1883")
-    b_host, _, b_port = str(broker).rpartition(":")
+    b_host, _, b_port = broker.rpartition(":") if isinstance(broker, str) else ("", "", "")
     if not b_host or not b_port.isdigit() or not 0 < int(b_port) <= 65535:
-        raise SpecError(f"`runtime.broker` must be 'host:port'; got {broker!r}")
-    name = str(top.get("name", "deployment"))
+        raise SpecError(
+            f"`runtime.broker` must be a string 'host:port' (port 1 to 65535); got {shown(broker)}"
+        )
+    name = _name("name", top.get("name", "deployment"))
     topic = rt.get("topic", f"etobs/{name}")
     if not isinstance(topic, str) or not topic or any(c in topic for c in "+#"):
-        raise SpecError(f"`runtime.topic` must be a topic without wildcards; got {topic!r}")
+        raise SpecError(
+            f"`runtime.topic` must be a non-empty string without wildcards (+, #); got {shown(topic)}"
+        )
     host = rt.get("host", "127.0.0.1")
     if not isinstance(host, str) or not host:
-        raise SpecError(f"`runtime.host` must be a host name or address; got {host!r}")
+        raise SpecError(f"`runtime.host` must be a host name or address (a string); got {shown(host)}")
 
     def port(key: str, default: int | None) -> int | None:
         value = rt.get(key, default)
@@ -212,18 +218,20 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
     x0 = plant.get("x0")
     if x0 is not None:
         if not isinstance(x0, list) or not x0:
-            raise SpecError(f"`plant.x0` must be a list of numbers; got {x0!r}")
+            raise SpecError(f"`plant.x0` must be a non-empty list of numbers; got {shown(x0)}")
         x0 = tuple(float(_number(f"plant.x0[{i}]", v)) for i, v in enumerate(x0))
     http_host = rt.get("http_host", "127.0.0.1")
     if not isinstance(http_host, str) or not http_host:
-        raise SpecError(f"`runtime.http_host` must be a host name or address; got {http_host!r}")
+        raise SpecError(
+            f"`runtime.http_host` must be a host name or address (a string); got {shown(http_host)}"
+        )
 
     def path(key: str, default: str | None) -> Path | None:
         value = rt.get(key, default)
         if value is None:
             return None
         if not isinstance(value, str) or not value:
-            raise SpecError(f"`runtime.{key}` must be a file name; got {value!r}")
+            raise SpecError(f"`runtime.{key}` must be a file name; got {shown(value)}")
         return Path(value) if Path(value).is_absolute() else base / value
 
     secret_file = path("secret_file", None) or base / "etobs.secret"
