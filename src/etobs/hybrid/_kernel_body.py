@@ -74,6 +74,7 @@ def _kernel(
     grid,
     log_cap,
     arc_cap,
+    log_cols,
     runs,
     status,
     t_final,
@@ -94,6 +95,7 @@ def _kernel(
     arc_j,
     arc_x,
     error_code,
+    log_x,
 ):
     # the scratch and failure flag of the runs of this thread, one run at a time; the
     # solver's own arrays live in one buffer (see _solve_one)
@@ -115,6 +117,7 @@ def _kernel(
             grid,
             log_cap,
             arc_cap,
+            log_cols,
             run,
             r,
             status,
@@ -136,6 +139,7 @@ def _kernel(
             arc_j,
             arc_x,
             error_code,
+            log_x,
         )
 
 
@@ -160,6 +164,7 @@ def _solve_one(
     grid,
     log_cap,
     arc_cap,
+    log_cols,
     run,
     slot,
     status,
@@ -181,6 +186,7 @@ def _solve_one(
     arc_j,
     arc_x,
     error_code,
+    log_x,
 ):
     rtol, atol = fopt[F_RTOL], fopt[F_ATOL]
     max_step, first_step, xtol_t = fopt[F_MAX_STEP], fopt[F_FIRST_STEP], fopt[F_XTOL]
@@ -197,7 +203,7 @@ def _solve_one(
     err_exp = -1.0 / (ERR_ORDER + 1)
     n_grid = grid.shape[0]
 
-    buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x)
+    buffers = (log_rule, log_t, log_j, arc_t, arc_j, arc_x, log_x, log_cols)
     # every array of the step loop is a view into the thread's buffer at ``base``, which
     # owns no memory: numba counts references on arrays that do at every call that takes
     # them, two atomic operations each (shared ones, like a row of P, also across threads)
@@ -443,10 +449,11 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
     jumps pile up in time (:mod:`etobs.hybrid.zeno`) and ``model_error`` when an event
     function is NaN (it would never fire). ``ctx`` is the run's fixed context (see
     ``_solve_one``); its ``buffers`` hold the jump log and arc arrays ``(log_rule, log_t,
-    log_j, arc_t, arc_j, arc_x)``, its ``zeno`` the rule's limit, span and window.
+    log_j, arc_t, arc_j, arc_x, log_x)`` and the logged state entries ``log_cols``, its
+    ``zeno`` the rule's limit, span and window.
     """
     args, p, g, f, t_end, m, max_jumps, keep_steps, log_cap, arc_cap, slot, buffers, zeno = ctx
-    log_rule, log_t, log_j = buffers[0], buffers[1], buffers[2]
+    log_rule, log_t, log_j, log_x, log_cols = buffers[0], buffers[1], buffers[2], buffers[6], buffers[7]
     zeno_jumps, zeno_span, zw = zeno
     while m > 0:
         guard_call(t, x, p, args, g)
@@ -468,6 +475,8 @@ def _jump_until_flow(ctx, t, x, j, nlog, narc):
                 log_rule[slot, nlog] = k
                 log_t[slot, nlog] = t
                 log_j[slot, nlog] = j
+                for c in range(log_cols.shape[0]):  # the logged entries after the jump
+                    log_x[slot, nlog, c] = x[log_cols[c]]
             nlog += 1
             j += 1
             if keep_steps:

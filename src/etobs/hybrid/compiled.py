@@ -26,15 +26,22 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.options import SaveAt, SolverOptions
-from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid
-from etobs.hybrid.system import _check_sizes
+from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid, log_names
+from etobs.hybrid.system import _check_sizes, check_log_columns
 
-#: Jump-log entries kept per run on the first pass (runs with more are solved again
-#: with room for all of them); bounded so that a big batch stays small in memory.
+#: Jump-log rows and arc points kept per run on the first pass (runs with more are
+#: solved again with room for all of them); bounded so that a big batch stays small.
 LOG_CAPACITY = 4096
 ARC_CAPACITY = 8192
-_BUFFER_BUDGET = 2**22  # entries in all runs' buffers together, first pass
+#: 8-byte words in all runs' jump-log buffers together on the first pass, and as many
+#: in their arc buffers (32 MiB each): a log row holds rule, t, j and the logged
+#: columns, an arc point t, j and the state.
+_BUFFER_BUDGET = 2**22
 _NEVER = 2**62  # a count no run reaches (SolverOptions(zeno_jumps=None))
+#: With a progress callback, the engine solves the batch in chunks of this many runs
+#: per thread and reports each chunk as it finishes: enough runs per thread that an
+#: uneven run rarely idles the others, few enough that the reports come often.
+CHUNK_PER_THREAD = 4
 
 
 @dataclass(frozen=True)
@@ -67,6 +74,9 @@ class CompiledSystem:
         for messages.
     keep : object
         What must stay alive for the addresses to stay valid (the compiled functions).
+    log_columns : tuple of int, optional
+        State entries whose values just after every jump are kept in the jump log
+        (``solution.jumps.x``), as :class:`~etobs.hybrid.HybridSystem`'s ``log_columns``.
 
     """
 
@@ -81,9 +91,11 @@ class CompiledSystem:
     rule_names: tuple[str, ...] = ()
     function_names: tuple[str, ...] = ("flow", "guard", "jump")
     keep: Any = None
+    log_columns: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         _check_sizes(self.n, self.n_rules, self.n_flow)
+        object.__setattr__(self, "log_columns", check_log_columns(self.log_columns, self.n))
         v.integer("n_params", self.n_params, lower=0)
         v.integer("n_work", self.n_work, lower=0)
         object.__setattr__(self, "ia", np.ascontiguousarray(np.r_[self.ia, 0], dtype=np.int64))
@@ -114,12 +126,14 @@ def compile_system(
     n_params: int = 0,
     rule_names: tuple[str, ...] = (),
     n_flow: int | None = None,
+    log_columns: tuple[int, ...] = (),
 ) -> CompiledSystem:
     """A :class:`CompiledSystem` from one-run Python functions.
 
     ``flow(t, x) -> x'``, ``guard(t, x) -> g`` (shape ``(n_rules,)``) and
     ``jump(k, t, x) -> x+``, on 1-D arrays; with ``n_params > 0`` each also takes the
-    run's parameter vector ``p`` last. ``n_flow`` as in :class:`CompiledSystem`.
+    run's parameter vector ``p`` last. ``n_flow`` and ``log_columns`` as in
+    :class:`CompiledSystem`.
 
     Examples
     --------
@@ -156,6 +170,7 @@ def compile_system(
         rule_names=rule_names,
         n_flow=n_flow,
         keep=fns,
+        log_columns=log_columns,
     )
 
 
@@ -172,6 +187,7 @@ def solve_compiled(
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
     parallel: bool = True,
+    progress: Callable[[int], object] | None = None,
 ) -> HybridSolution:
     """Solve a batch of runs of a :class:`CompiledSystem`.
 
@@ -189,6 +205,11 @@ def solve_compiled(
         What to keep (default: the full hybrid arcs).
     parallel : bool
         Spread the runs over numba's threads (``numba.set_num_threads`` sets how many).
+    progress : callable, optional
+        ``progress(k)`` is called each time ``k`` more runs have finished (the calls sum
+        to ``B``), e.g. a tqdm bar's ``update``. The batch is then solved in chunks of
+        :data:`CHUNK_PER_THREAD` runs per thread; each run's numbers are the same as
+        without chunks (runs are independent).
 
     Returns
     -------
@@ -198,9 +219,10 @@ def solve_compiled(
     """
     if not isinstance(system, CompiledSystem):
         raise InputTypeError(f"`system` must be a CompiledSystem; got {type(system).__name__}")
-    from etobs.hybrid.solver import span
+    from etobs.hybrid.solver import check_progress, span
 
     t0, t_end = span(t_span)
+    progress = check_progress(progress)
     x = np.array(v.batch("x0", x0, system.n), dtype=float, order="C")
     B = x.shape[0]
     P = _params(params, system.n_params, B)
@@ -209,34 +231,24 @@ def solve_compiled(
     grid = np.empty(0) if save.grid is None else np.array(save.grid, dtype=float, order="C")
     dist = save.distance_pairs(system.n)
     out = _Buffers(B, system.n, grid.shape[0], reduce=dist.shape[0] > 0)
-    runs = np.arange(B)
-    log_cap = int(np.clip(_BUFFER_BUDGET // max(B, 1), 64, LOG_CAPACITY))
-    arc_cap = int(np.clip(_BUFFER_BUDGET // max(B * system.n, 1), 64, ARC_CAPACITY)) if save.steps else 0
+    solve = partial(_solve_runs, system, x, P, t0, t_end, opts, save.steps, grid, dist, out, parallel)
     logs: dict[int, tuple[np.ndarray, ...]] = {}
     arcs: dict[int, tuple[np.ndarray, ...]] = {}
-    while runs.size:
-        part = _call(
-            system, x, P, t0, t_end, opts, save.steps, grid, dist, runs, log_cap, arc_cap, out, parallel
-        )
-        full = (out.log_n[runs] > log_cap) | (out.arc_n[runs] > arc_cap)
-        for slot in np.flatnonzero(~full):
-            r = int(runs[slot])
-            logs[r] = tuple(a[slot, : out.log_n[r]].copy() for a in part[:3])
-            if save.steps:
-                arcs[r] = tuple(a[slot, : out.arc_n[r]].copy() for a in part[3:])
-        # Runs whose buffers overflowed are solved again with room for everything (same
-        # numbers: the computation does not depend on the buffers).
-        runs = runs[full]
-        if runs.size:
-            log_cap = max(log_cap, int(out.log_n[runs].max()))
-            arc_cap = max(arc_cap, int(out.arc_n[runs].max())) if save.steps else 0
+    if progress is None:
+        solve(np.arange(B), logs, arcs)  # one pass, no chunking overhead
+    else:
+        size = CHUNK_PER_THREAD * (_threads() if parallel else 1)
+        for start in range(0, B, size):
+            runs = np.arange(start, min(start + size, B))
+            solve(runs, logs, arcs)
+            progress(runs.size)
     return HybridSolution(
         t_span=(t0, t_end),
         status=out.status,
         t_final=out.t_final,
         j_final=out.j_final,
         x_final=out.x_final,
-        jumps=_jump_log(logs, B),
+        jumps=_jump_log(logs, B, system.log_columns),
         arcs=tuple(HybridArc(*arcs[r]) for r in range(B)) if save.steps else None,
         grid=SavedGrid(grid, out.grid_j, out.grid_x) if save.grid is not None and not dist.size else None,
         n_steps=out.n_steps,
@@ -246,6 +258,55 @@ def solve_compiled(
         failures=tuple(system.failure(c) if c else "" for c in out.error_code),
         grid_max=GridMax(grid, out.grid_max) if dist.size else None,
     )
+
+
+def _solve_runs(
+    system: CompiledSystem,
+    x: np.ndarray,
+    P: np.ndarray,
+    t0: float,
+    t_end: float,
+    opts: SolverOptions,
+    keep_steps: bool,
+    grid: np.ndarray,
+    dist: np.ndarray,
+    out: _Buffers,
+    parallel: bool,
+    runs: np.ndarray,
+    logs: dict[int, tuple[np.ndarray, ...]],
+    arcs: dict[int, tuple[np.ndarray, ...]],
+) -> None:
+    """Solve ``runs`` into ``out``, and their jump logs and arcs into ``logs`` and ``arcs``."""
+    log_cap, arc_cap = capacities(runs.size, system.n, len(system.log_columns), keep_steps)
+    while runs.size:
+        part = _call(
+            system, x, P, t0, t_end, opts, keep_steps, grid, dist, runs, log_cap, arc_cap, out, parallel
+        )
+        full = (out.log_n[runs] > log_cap) | (out.arc_n[runs] > arc_cap)
+        for slot in np.flatnonzero(~full):
+            r = int(runs[slot])
+            logs[r] = tuple(a[slot, : out.log_n[r]].copy() for a in part[:4])
+            if keep_steps:
+                arcs[r] = tuple(a[slot, : out.arc_n[r]].copy() for a in part[4:])
+        # Runs whose buffers overflowed are solved again with room for everything (same
+        # numbers: the computation does not depend on the buffers).
+        runs = runs[full]
+        if runs.size:
+            log_cap = max(log_cap, int(out.log_n[runs].max()))
+            arc_cap = max(arc_cap, int(out.arc_n[runs].max())) if keep_steps else 0
+
+
+def capacities(R: int, n: int, n_log: int, keep_steps: bool) -> tuple[int, int]:
+    """First-pass jump-log rows and arc points per run for ``R`` runs (:data:`_BUFFER_BUDGET`).
+
+    A log row takes ``3 + n_log`` words (rule, t, j, the logged columns), an arc point
+    ``2 + n`` (t, j, the state); each kind gets the budget, split over the runs, within
+    ``64 .. LOG_CAPACITY`` (``ARC_CAPACITY``) per run. Returns ``(log_cap, arc_cap)``,
+    ``arc_cap = 0`` without ``keep_steps``.
+    """
+    log_cap = int(np.clip(_BUFFER_BUDGET // max(R * (3 + n_log), 1), 64, LOG_CAPACITY))
+    arc_cap = int(np.clip(_BUFFER_BUDGET // max(R * (2 + n), 1), 64, ARC_CAPACITY)) if keep_steps else 0
+    return log_cap, arc_cap
 
 
 def _params(params: Any, n_params: int, B: int) -> np.ndarray:
@@ -323,6 +384,7 @@ def _call(
     log_rule = np.zeros((R, log_cap), dtype=np.int64)
     log_t = np.zeros((R, log_cap))
     log_j = np.zeros((R, log_cap), dtype=np.int64)
+    log_x = np.zeros((R, log_cap, len(system.log_columns)))
     arc_t = np.zeros((R, arc_cap))
     arc_j = np.zeros((R, arc_cap), dtype=np.int64)
     arc_x = np.zeros((R, arc_cap, n))
@@ -340,6 +402,7 @@ def _call(
         grid,
         log_cap,
         arc_cap,
+        np.array(system.log_columns, dtype=np.int64),
     )
     rest = (
         out.status,
@@ -361,6 +424,7 @@ def _call(
         arc_j,
         arc_x,
         out.error_code,
+        log_x,
     )
     threads = _threads() if parallel else 1
     # Each thread solves a contiguous slice of ``runs``; the kernel releases the GIL.
@@ -373,7 +437,7 @@ def _call(
             + tuple(buf[a:b] for buf in rest[7:10])
             + rest[10:15]  # grid_x, grid_j, dist, grid_max, arc_n
             + tuple(buf[a:b] for buf in rest[15:18])
-            + rest[18:]
+            + (rest[18], rest[19][a:b])  # error_code, log_x
         )
         jobs.append((np.ascontiguousarray(runs[a:b], dtype=np.int64), views))
     if len(jobs) == 1:
@@ -381,7 +445,7 @@ def _call(
     else:
         with ThreadPoolExecutor(len(jobs)) as pool:
             list(pool.map(lambda job: call(job[0], *job[1]), jobs))
-    return log_rule, log_t, log_j, arc_t, arc_j, arc_x
+    return log_rule, log_t, log_j, log_x, arc_t, arc_j, arc_x
 
 
 _BUILT: dict[str, Any] = {}
@@ -405,7 +469,7 @@ def _threads() -> int:
     return int(numba.get_num_threads())
 
 
-def _jump_log(logs: dict[int, tuple[np.ndarray, ...]], B: int) -> JumpLog:
+def _jump_log(logs: dict[int, tuple[np.ndarray, ...]], B: int, columns: tuple[int, ...]) -> JumpLog:
     empty = np.empty(0, dtype=np.int64)
     counts = [len(logs[r][0]) for r in range(B)]
     return JumpLog(
@@ -413,4 +477,6 @@ def _jump_log(logs: dict[int, tuple[np.ndarray, ...]], B: int) -> JumpLog:
         rule=np.concatenate([logs[r][0] for r in range(B)] or [empty]).astype(np.int64),
         t=np.concatenate([logs[r][1] for r in range(B)] or [np.empty(0)]),
         j=np.concatenate([logs[r][2] for r in range(B)] or [empty]).astype(np.int64),
+        x=np.concatenate([logs[r][3] for r in range(B)] or [np.empty((0, len(columns)))]),
+        names=log_names(columns),
     )

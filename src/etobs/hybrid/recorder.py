@@ -8,17 +8,23 @@ from __future__ import annotations
 import numpy as np
 
 from etobs.hybrid.options import SaveAt
-from etobs.hybrid.solution import HybridArc, JumpLog, SavedGrid
+from etobs.hybrid.solution import HybridArc, JumpLog, SavedGrid, log_names
 
 
 class Recorder:
-    """Accumulates arrays chunk by chunk; every call takes the runs it concerns."""
+    """Accumulates arrays chunk by chunk; every call takes the runs it concerns.
 
-    def __init__(self, n_runs: int, n: int, save: SaveAt, t0: float) -> None:
+    ``log_columns`` are the state entries logged at every jump (the system's).
+    """
+
+    def __init__(
+        self, n_runs: int, n: int, save: SaveAt, t0: float, log_columns: tuple[int, ...] = ()
+    ) -> None:
         self.n_runs, self.n = n_runs, n
         self.keep_steps = save.steps
+        self.log_columns = log_columns
         self._steps: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self._jumps: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._jumps: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self.grid_t = save.grid
         if self.grid_t is not None:
             g = self.grid_t.shape[0]
@@ -32,10 +38,11 @@ class Recorder:
             t = np.broadcast_to(t, runs.shape)
             self._steps.append((runs.copy(), t.copy(), j.copy(), x.copy()))
 
-    def jumps(self, runs: np.ndarray, rule: int, t: np.ndarray, j: np.ndarray) -> None:
-        """Log one jump of ``rule`` for each of ``runs`` from ``(t, j)``."""
+    def jumps(self, runs: np.ndarray, rule: int, t: np.ndarray, j: np.ndarray, x: np.ndarray) -> None:
+        """Log one jump of ``rule`` for each of ``runs`` from ``(t, j)``; ``x`` the states after it."""
         if runs.size:
-            self._jumps.append((runs.copy(), np.full(runs.shape, rule), t.copy(), j.copy()))
+            kept = x[:, list(self.log_columns)]  # a copy (fancy indexing)
+            self._jumps.append((runs.copy(), np.full(runs.shape, rule), t.copy(), j.copy(), kept))
 
     def grid_due(self, runs: np.ndarray, t_stop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Grid points not yet filled up to and including ``t_stop`` for each run.
@@ -77,12 +84,13 @@ class Recorder:
 
     def jump_log(self) -> JumpLog:
         """All jumps, sorted by run then ``j``."""
+        names = log_names(self.log_columns)
         if not self._jumps:
             e = np.empty(0, dtype=np.int64)
-            return JumpLog(e, e.copy(), np.empty(0), e.copy())
-        run, rule, t, j = (np.concatenate([c[k] for c in self._jumps]) for k in range(4))
+            return JumpLog(e, e.copy(), np.empty(0), e.copy(), np.empty((0, len(names))), names)
+        run, rule, t, j, x = (np.concatenate([c[k] for c in self._jumps]) for k in range(5))
         order = np.lexsort((j, run))
-        return JumpLog(run[order], rule[order].astype(np.int64), t[order], j[order])
+        return JumpLog(run[order], rule[order].astype(np.int64), t[order], j[order], x[order], names)
 
     def saved_grid(self) -> SavedGrid | None:
         """The grid values, or ``None`` when no grid was asked for."""

@@ -14,6 +14,7 @@ with :func:`scipy.optimize.brentq`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.peaks import peak_probes
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import GridMax, HybridSolution, SavedGrid, max_over_grid
-from etobs.hybrid.solver import check_inputs
+from etobs.hybrid.solver import check_inputs, check_progress
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import BatchedSystem, HybridSystem, raised, read_only
 from etobs.hybrid.zeno import zeno_window
@@ -83,6 +84,7 @@ def solve_reference(
     *,
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> HybridSolution:
     """Solve each run with ``solve_ivp``; same arguments and result as :func:`~etobs.hybrid.solve`.
 
@@ -95,11 +97,12 @@ def solve_reference(
     if isinstance(system, HybridSystem):
         system = system.batched()
     X, t0, t_end = check_inputs(system, x0, t_span)
+    progress = check_progress(progress)
     opts = options or SolverOptions()
     save = save or SaveAt()
     dist = save.distance_pairs(system.n)
     B = X.shape[0]
-    rec = Recorder(B, system.n, save, t0)
+    rec = Recorder(B, system.n, save, t0, system.log_columns)
     status = np.full(B, Status.RUNNING, dtype=np.int64)
     t_final, j_final = np.full(B, t0), np.zeros(B, dtype=np.int64)
     x_final = X.copy()
@@ -115,6 +118,8 @@ def solve_reference(
             except ModelError as exc:  # a model function failed: this run ends, the others go on
                 status[b], failures[b] = Status.MODEL_ERROR, str(exc)
         t_final[b], j_final[b], x_final[b], n_steps[b] = run.t, run.j, run.x, run.n_steps
+        if progress is not None:
+            progress(1)
     return HybridSolution(
         t_span=(t0, t_end),
         status=status,
@@ -238,7 +243,7 @@ class _Run:
                     return Status.MAX_JUMPS
                 out = _call("jump", self.sys.jump, int(k), np.array([self.t]), self.x[None])
                 xn = _checked("jump", out, (1, self.sys.n))[0].copy()
-                self.rec.jumps(self.b, int(k), np.array([self.t]), np.array([self.j]))
+                self.rec.jumps(self.b, int(k), np.array([self.t]), np.array([self.j]), xn[None])
                 self.j += 1
                 self.x = xn
                 self.keep(self.t, xn)

@@ -33,6 +33,7 @@ Solver contract (what :func:`solve` guarantees for every run of the batch):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -93,6 +94,16 @@ def span(t_span: Any) -> tuple[float, float]:
     return t0, t_end
 
 
+def check_progress(progress: Any) -> Callable[[int], object] | None:
+    """``progress`` validated: a callable ``progress(n_runs_finished)``, or ``None``."""
+    if progress is not None and not callable(progress):
+        raise InputTypeError(
+            "`progress` must be a callable progress(n_runs_finished) (a tqdm bar's update, say) "
+            f"or None; got {type(progress).__name__}"
+        )
+    return progress
+
+
 def solve(
     system: HybridSystem | BatchedSystem,
     x0: Any,
@@ -101,6 +112,7 @@ def solve(
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
     backend: str = "auto",
+    progress: Callable[[int], object] | None = None,
 ) -> HybridSolution:
     """Solve a batch of runs of a hybrid system (the front door of :mod:`etobs.hybrid`).
 
@@ -120,6 +132,10 @@ def solve(
         for a :class:`HybridSystem`; ``"scipy"``: the ``solve_ivp`` reference, which calls
         the Python functions as they are (``"auto"`` takes it for a
         :class:`BatchedSystem`). Both follow the contract in the module docstring.
+    progress : callable, optional
+        Called as ``progress(k)`` each time ``k`` more runs have finished; the calls sum
+        to ``B`` (pass a tqdm bar's ``update``). The numbers do not depend on it: the
+        engine then solves the batch in chunks of runs, each run as it would alone.
 
     Returns
     -------
@@ -147,9 +163,11 @@ def solve(
         from etobs.hybrid.compiled import solve_compiled
 
         params = system.params if system.params.size else None
-        return solve_compiled(system.compiled(), x0, t_span, params=params, options=options, save=save)
+        return solve_compiled(
+            system.compiled(), x0, t_span, params=params, options=options, save=save, progress=progress
+        )
     if isinstance(system, BatchedSystem) and backend == "engine":
         raise InputError("backend='engine' needs a HybridSystem written for one run; got a BatchedSystem")
     from etobs.hybrid.reference import solve_reference
 
-    return solve_reference(system, x0, t_span, options=options, save=save)
+    return solve_reference(system, x0, t_span, options=options, save=save, progress=progress)

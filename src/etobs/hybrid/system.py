@@ -47,6 +47,19 @@ def _check_sizes(n: int, n_rules: int, n_flow: int | None) -> None:
             raise InputError(f"`n_flow` must be <= n = {n}; got {n_flow}")
 
 
+def check_log_columns(log_columns: Any, n: int) -> tuple[int, ...]:
+    """``log_columns`` validated: distinct state indices in ``0 .. n-1`` (empty: none)."""
+    if isinstance(log_columns, tuple | list | range | np.ndarray) and len(log_columns) == 0:
+        return ()
+    cols = v.index_tuple("log_columns", log_columns, "state")
+    beyond = [c for c in cols if c >= n]
+    if beyond:
+        raise InputError(
+            f"`log_columns` must be state indices 0..{n - 1} (n = {n}); got {list(cols)} ({beyond[0]} >= n)"
+        )
+    return cols
+
+
 @dataclass(frozen=True)
 class HybridSystem:
     """A hybrid system with ``n_rules`` jump rules, written for one run.
@@ -76,6 +89,10 @@ class HybridSystem:
         A parameter vector passed to every function as its last argument
         (``flow(t, x, p)``, ``guard(t, x, p)``, ``jump(k, t, x, p)``); numbers kept here
         change without a recompile.
+    log_columns : tuple of int, optional
+        State entries kept in the jump log: at every jump, their values just after it
+        (``x+[log_columns]``) become a row of ``solution.jumps.x``, named ``x_i``
+        (the state at a jump is otherwise kept only with ``SaveAt(steps=True)``).
 
     Write the functions with numpy or ``math``: the engine compiles them (and the Python
     functions they call); they may return a 1-D array or a tuple of floats.
@@ -107,6 +124,7 @@ class HybridSystem:
     rule_names: tuple[str, ...] = ()
     n_flow: int | None = None
     params: Any = None
+    log_columns: tuple[int, ...] = ()
     _compiled: dict[str, Any] = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -116,6 +134,7 @@ class HybridSystem:
         v.function("jump", self.jump)
         object.__setattr__(self, "rule_names", _names(self.n_rules, tuple(self.rule_names)))
         object.__setattr__(self, "params", v.params("params", self.params))
+        object.__setattr__(self, "log_columns", check_log_columns(self.log_columns, self.n))
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_compiled": {}}  # compiled functions stay in their process
@@ -149,6 +168,7 @@ class HybridSystem:
                 n_params=self.params.size,
                 rule_names=self.rule_names,
                 n_flow=self.n_flow,
+                log_columns=self.log_columns,
             )
         return self._compiled["engine"]
 
@@ -165,6 +185,7 @@ class HybridSystem:
             jump=jump,
             rule_names=self.rule_names,
             n_flow=self.n_flow,
+            log_columns=self.log_columns,
         )
 
 
@@ -236,6 +257,7 @@ class BatchedSystem:
     jump: JumpFn
     rule_names: tuple[str, ...] = ()
     n_flow: int | None = None
+    log_columns: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         _check_sizes(self.n, self.n_rules, self.n_flow)
@@ -243,3 +265,4 @@ class BatchedSystem:
         v.function("guard", self.guard)
         v.function("jump", self.jump)
         object.__setattr__(self, "rule_names", _names(self.n_rules, tuple(self.rule_names)))
+        object.__setattr__(self, "log_columns", check_log_columns(self.log_columns, self.n))
