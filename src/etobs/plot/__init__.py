@@ -1,7 +1,17 @@
 """Figures from simulation results (needs the ``plot`` extra: matplotlib)."""
 
+from etobs.plot.arc import plot_hybrid_arc
 from etobs.plot.compare import plot_tradeoff
 from etobs.plot.figures import plot_error, plot_inter_event_times, plot_states
+from etobs.plot.held import plot_held_outputs
 from etobs.plot.trace import plot_trace
 
-__all__ = ["plot_error", "plot_inter_event_times", "plot_states", "plot_trace", "plot_tradeoff"]
+__all__ = [
+    "plot_error",
+    "plot_held_outputs",
+    "plot_hybrid_arc",
+    "plot_inter_event_times",
+    "plot_states",
+    "plot_trace",
+    "plot_tradeoff",
+]

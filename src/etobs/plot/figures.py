@@ -1,4 +1,4 @@
-"""The paper's three figures (section 7) from an :class:`~etobs.estimation.EstimationResult`.
+"""The paper's three figures (section 8) from an :class:`~etobs.estimation.EstimationResult`.
 
 Each function returns the :class:`matplotlib.figure.Figure` and its axes; nothing is
 shown or saved here. ``pyplot`` is never imported, so these work headless.
@@ -10,24 +10,43 @@ from typing import Any
 
 import numpy as np
 
-from etobs.errors import InputError
+from etobs._validate import shown
+from etobs.errors import InputError, InputTypeError
 from etobs.estimation.metrics import inter_event_times
 from etobs.estimation.result import EstimationResult, Trajectory
 
 
-def _figure(nrows: int, height: float) -> tuple[Any, Any]:
+def _figure(nrows: int, height: float, height_ratios: list[float] | None = None) -> tuple[Any, Any]:
     try:
         from matplotlib.figure import Figure
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError("plotting needs matplotlib: pip install 'etobs[plot]'") from exc
     fig = Figure(figsize=(7.0, height), layout="constrained")
-    axes = fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
+    grid = {"height_ratios": height_ratios} if height_ratios is not None else None
+    axes = fig.subplots(nrows, 1, sharex=True, squeeze=False, gridspec_kw=grid)[:, 0]
     return fig, axes
 
 
+def _run(n_runs: int, run: Any) -> int:
+    """``run`` checked against a batch of ``n_runs`` runs."""
+    if isinstance(run, bool) or not isinstance(run, int | np.integer):
+        raise InputTypeError(f"`run` must be an integer; got {shown(run)} ({type(run).__name__})")
+    if not 0 <= run < n_runs:
+        raise InputError(f"`run` must be in 0..{n_runs - 1}; got {run}")
+    return int(run)
+
+
+def _node_name(result: EstimationResult, node: int) -> str:
+    """How figures name node ``node`` (output nodes, then input nodes, as in ``transmissions``)."""
+    pb = result.problem
+    if node < pb.n_nodes:
+        return pb.nodes[node].name or f"node {node}"
+    k = node - pb.n_nodes
+    return pb.input_nodes[k].name or f"input node {k}"
+
+
 def _trajectory(result: EstimationResult, run: int) -> Trajectory:
-    if not 0 <= run < result.n_runs:
-        raise InputError(f"`run` must be in 0..{result.n_runs - 1}; got {run}")
+    run = _run(result.n_runs, run)
     if result.solution.grid is not None:
         g = result.on_grid()
         keep = np.isfinite(g.x[run]).all(axis=1)
@@ -76,12 +95,13 @@ def plot_error(result: EstimationResult, run: int = 0, *, log: bool = True) -> t
 
 def plot_inter_event_times(result: EstimationResult, run: int = 0) -> tuple[Any, np.ndarray]:
     """Time since the node's previous transmission, at each transmission, one panel per node."""
+    run = _run(result.n_runs, run)
     N = result.n_nodes
     fig, axes = _figure(N, 1.8 * N + 0.6)
     for i, ax in enumerate(axes):
         times = result.transmission_times(run, i)
         gaps = inter_event_times(result, run, i)
-        name = result.problem.nodes[i].name or f"node {i}"
+        name = _node_name(result, i)
         if gaps.size:
             ax.stem(times[1:], gaps, basefmt=" ")
             ax.axhline(gaps.min(), color="C3", lw=0.8, ls=":", label=f"min {gaps.min():.3f} s")

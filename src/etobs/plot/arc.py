@@ -1,0 +1,256 @@
+"""Hybrid arcs in hybrid time ``(t, j)``, drawn as the HyEQ toolbox draws them.
+
+The HyEQ toolbox (Sanfelice et al.; ``plotflows``, ``plotTimeDomain``,
+``HybridPlotBuilder``) draws a hybrid arc's flows as solid lines and connects the values
+before and after each jump with a dashed line. We keep that convention and show the jump
+index ``j`` in a second panel, the hybrid time domain ``j`` against ``t`` (HyEQ's
+``plotTimeDomain``), rather than in a 3-D ``(t, j, x)`` view (``plotHarc``): an
+estimator makes hundreds of transmissions, which a 3-D view squeezes into an unreadable
+ribbon, while two panels sharing the ``t`` axis keep both the values and the jump
+instants legible at any count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from etobs import _validate as v
+from etobs.errors import InputError, InputTypeError
+from etobs.estimation.result import EstimationResult
+from etobs.hybrid.solution import HybridArc, HybridSolution
+from etobs.plot.figures import _figure, _node_name, _run
+
+#: What ``plot_hybrid_arc`` can draw from an :class:`EstimationResult`, with its label.
+_VARIABLES = {
+    "error": r"$|x - \hat x|$",
+    "x": "x",
+    "xhat": r"\hat x",
+    "z": "z",
+    "ybar": r"\bar y",
+    "e": "e",
+    "eta": r"\eta",
+}
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """One run's points in hybrid-time order: ``values[k]`` at ``(t[k], j[k])``."""
+
+    t: np.ndarray
+    j: np.ndarray
+    values: np.ndarray  # (K, m)
+    labels: tuple[str, ...]
+    refined: bool  # whether the save grid's points were added to the arc's
+
+
+def hybrid_order(t: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Indices sorting points by hybrid time: by ``j``, then ``t``.
+
+    ``j`` first: at a jump time ``t`` both ``(t, j)`` and ``(t, j + 1)`` exist, and the
+    point before the jump must come first.
+    """
+    return np.lexsort((t, j))
+
+
+def solution_rows(sol: HybridSolution, run: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """Run ``run``'s points ``(t, j, q)`` in hybrid-time order, and what they come from.
+
+    The arc (``"arc"``) holds the state at step ends and on both sides of every jump, so
+    its flows are chords between steps that may be long; the save grid's points lie on
+    the same solution (dense output; at a jump time, the value before the jump), so when
+    both were kept they are merged (``"arc+grid"``): smoother flows, the same jumps
+    (HyEQ's ``Refine`` does the same). ``"grid"``: only the grid (no jump drawn exactly);
+    ``""``: neither was kept.
+    """
+    parts, kept = [], []
+    if sol.arcs is not None:
+        arc = sol.arcs[run]
+        parts.append((arc.t, arc.j, arc.x))
+        kept.append("arc")
+    if sol.grid is not None:
+        g = sol.grid
+        keep = g.j[run] >= 0  # -1 outside the horizon or after the run stopped
+        parts.append((g.t[keep], g.j[run][keep], g.x[run][keep]))
+        kept.append("grid")
+    if not parts:
+        return np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, sol.x_final.shape[1])), ""
+    t, j, q = (np.concatenate(p) for p in zip(*parts, strict=True))
+    order = hybrid_order(t, j)
+    return t[order], j[order], q[order], "+".join(kept)
+
+
+def _components(name: str, value: Any, dim: int) -> tuple[int, ...]:
+    if value is None:
+        return tuple(range(dim))
+    comps = v.index_tuple(name, value, what="component")
+    for k in comps:
+        if k >= dim:
+            raise InputError(f"`{name}` must be in 0..{dim - 1}; got {k}")
+    return comps
+
+
+def _estimation_rows(result: EstimationResult, run: int, what: str, components: Any) -> _Rows:
+    if what not in _VARIABLES:
+        raise InputError(f"`what` must be one of {sorted(_VARIABLES)}; got {what!r}")
+    if result.solution.arcs is None:
+        result.arc(run)  # raises, saying how to keep the arcs
+    t, j, q, kept = solution_rows(result.solution, run)
+    tr, refined = result._trajectory(t, j, q), kept == "arc+grid"
+    if what == "error":
+        if components is not None:
+            raise InputError(
+                "`components` selects entries of a vector; `what='error'` is the scalar |x - xhat|"
+            )
+        return _Rows(tr.t, tr.j, tr.error[:, None], (_VARIABLES["error"],), refined)
+    values = getattr(tr, what)
+    if what == "eta":
+        stateful = [i for i in range(values.shape[1]) if np.isfinite(values[:, i]).any()]
+        if components is None:
+            if not stateful:
+                raise InputError("`what='eta'`: no node's rule has a state eta (static or periodic rules)")
+            comps = tuple(stateful)
+        else:
+            comps = _components("components", components, values.shape[1])
+            for i in comps:
+                if i not in stateful:
+                    raise InputError(
+                        f"`components` names node {i} ({_node_name(result, i)}), whose rule has no state eta"
+                    )
+        labels = tuple(rf"$\eta$ ({_node_name(result, i)})" for i in comps)
+    else:
+        comps = _components("components", components, values.shape[1])
+        labels = tuple(f"${_VARIABLES[what]}_{{{k + 1}}}$" for k in comps)
+    return _Rows(tr.t, tr.j, values[:, comps], labels, refined)
+
+
+def _hybrid_rows(result: HybridSolution | HybridArc, run: int, what: str, components: Any) -> _Rows:
+    if what != "x":
+        raise InputError(
+            f"`what` must be 'x' for a {type(result).__name__} (it holds only the state x); got {what!r}"
+        )
+    if isinstance(result, HybridArc):
+        if run != 0:
+            raise InputError(f"`run` must be 0 for a HybridArc (one run); got {run}")
+        t, j, x, kept = result.t, result.j, result.x, "arc"
+    else:
+        run = _run(result.n_runs, run)
+        if result.arcs is None:
+            raise InputError("this solution kept no arcs: solve with save=SaveAt(steps=True)")
+        t, j, x, kept = solution_rows(result, run)
+    comps = _components("components", components, x.shape[1])
+    return _Rows(t, j, x[:, comps], tuple(f"$x_{{{k + 1}}}$" for k in comps), kept == "arc+grid")
+
+
+def flows_and_jumps(t: np.ndarray, j: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split points in hybrid-time order into flows and jumps.
+
+    Returns ``(tf, yf, jumps)``: ``tf, yf`` are ``t, y`` with a NaN between consecutive
+    flow intervals (so one line draws every flow and none crosses a jump), and
+    ``jumps[k] = [[t, y before], [t, y after]]`` for each jump, shape ``(J, 2, 2)``.
+    """
+    at = np.flatnonzero(np.diff(j) != 0)  # point at..at+1 is a jump
+    tf = np.insert(np.asarray(t, dtype=float), at + 1, np.nan)
+    yf = np.insert(np.asarray(y, dtype=float), at + 1, np.nan)
+    jumps = np.stack(
+        [np.stack([t[at], y[at]], axis=-1), np.stack([t[at + 1], y[at + 1]], axis=-1)], axis=1
+    ).astype(float)
+    return tf, yf, jumps.reshape(-1, 2, 2)
+
+
+def _draw(ax: Any, t: np.ndarray, j: np.ndarray, y: np.ndarray, flow: Any, jump: Any, label: str) -> None:
+    """Flows solid, jumps dashed (HyEQ's convention); one artist each."""
+    from matplotlib.collections import LineCollection
+
+    tf, yf, jumps = flows_and_jumps(t, j, y)
+    ax.plot(tf, yf, color=flow, lw=1.2, label=label)
+    ax.add_collection(LineCollection(list(jumps), colors=[jump], linestyles="--", linewidths=0.9))
+
+
+def plot_hybrid_arc(
+    result: EstimationResult | HybridSolution | HybridArc,
+    run: int = 0,
+    *,
+    what: str | None = None,
+    components: Any = None,
+    log: bool | None = None,
+) -> tuple[Any, np.ndarray]:
+    """One run's hybrid arc in hybrid time ``(t, j)``: flows solid, jumps dashed (HyEQ).
+
+    The top panel draws the chosen variable against ``t``; each jump is a dashed segment
+    from the value before it to the value after it, at the jump's time. The bottom panel
+    is the hybrid time domain, ``j`` against ``t``, drawn the same way: each step up is a
+    jump (for an estimator, a transmission, or with a network a packet's delivery).
+
+    Parameters
+    ----------
+    result : EstimationResult, HybridSolution or HybridArc
+        Simulated with ``save=SaveAt(steps=True)`` (the default). When the save grid was
+        kept too, its points are added to the arc's to draw the flows smoothly (the
+        title says so); the jumps are the arc's.
+    run : int
+        Which run (0 for a HybridArc).
+    what : str, optional
+        For an EstimationResult: ``"error"`` (default, ``|x - xhat|``), ``"x"``,
+        ``"xhat"``, ``"z"``, ``"ybar"``, ``"e"`` (``e = ybar - ytilde``, eq. (49)) or
+        ``"eta"`` (one curve per node with a dynamic rule). For a HybridSolution or a
+        HybridArc: ``"x"`` (default), the hybrid state.
+    components : int or sequence of int, optional
+        Entries of the variable to draw (indices from 0; for ``"eta"``, nodes). Default:
+        all.
+    log : bool, optional
+        Logarithmic value axis; default only for ``"error"``, as in :func:`plot_error`.
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes, shape (2,)
+        The variable against ``t``, then ``j`` against ``t``.
+
+    Examples
+    --------
+    >>> fig, (ax, ax_j) = plot_hybrid_arc(result, what="eta")  # doctest: +SKIP
+    >>> fig.savefig("eta.png")  # doctest: +SKIP
+
+    """
+    if what is not None and not isinstance(what, str):
+        raise InputTypeError(f"`what` must be a string; got {v.shown(what)} ({type(what).__name__})")
+    if isinstance(result, EstimationResult):
+        rows = _estimation_rows(result, _run(result.n_runs, run), what or "error", components)
+        name = what or "error"
+    elif isinstance(result, HybridSolution | HybridArc):
+        rows = _hybrid_rows(result, run, what or "x", components)
+        name = "x"
+    else:
+        raise InputTypeError(
+            "`result` must be an EstimationResult, a HybridSolution or a HybridArc; "
+            f"got {type(result).__name__}"
+        )
+    if log is not None:
+        v.flag("log", log)
+    fig, axes = _figure(2, 4.4, height_ratios=[3.0, 1.0])
+    ax, ax_j = axes
+    single = rows.values.shape[1] == 1
+    for k, label in enumerate(rows.labels):
+        # one variable: HyEQ's colours (blue flows, red jumps); several: one colour each
+        flow = "C0" if single else f"C{k % 10}"
+        _draw(ax, rows.t, rows.j, rows.values[:, k], flow, "C3" if single else flow, label)
+    if log if log is not None else name == "error":
+        ax.set_yscale("log")
+    ax.autoscale_view()
+    ax.set_ylabel(rows.labels[0] if single else name)
+    if not single:
+        ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(rows.labels)))
+    ax.grid(alpha=0.3, which="both")
+    _draw(ax_j, rows.t, rows.j, rows.j, "0.25", "C3", "j")
+    ax_j.autoscale_view()
+    ax_j.set_ylabel("j")
+    ax_j.set_xlabel("t [s]")
+    ax_j.yaxis.get_major_locator().set_params(integer=True)
+    ax_j.grid(alpha=0.3)
+    n_jumps = int(np.count_nonzero(np.diff(rows.j)))
+    note = ", flows refined with the save grid" if rows.refined else ""
+    fig.suptitle(f"Hybrid arc of run {run}: flows solid, {n_jumps} jumps dashed{note}")
+    return fig, axes
