@@ -187,6 +187,19 @@ def test_fingerprint_is_equal_for_equal_content():
     )
 
 
+def test_fingerprint_of_a_function_calling_numpy_functions_is_the_same_in_every_process():
+    # np.sum, np.ravel (numpy's _ArrayFunctionDispatcher) have a repr with an address: the
+    # hash changed in every process and such functions were compiled again each time
+    script = """
+        import json, numpy as np
+        from etobs.compile.fingerprint import fingerprint
+        def f(t, x):
+            return np.ravel(x) * np.sum(x)
+        print(json.dumps({"fp": fingerprint(f)}))
+        """
+    assert _run(script)["fp"] == _run(script)["fp"]
+
+
 def test_fingerprint_changes_with_closed_over_values_and_called_helpers(monkeypatch):
     a = np.array([[1.0, 2.0], [3.0, 4.0]])
     base = fingerprint(_closure(a, _scale))
