@@ -1,4 +1,4 @@
-"""The paper's extensions in simulation: the triggered input (section 6.3), the
+"""The paper's extensions in simulation: the triggered input (section 7.3), the
 relative-threshold baseline and the observer-copy variant of Remark 3."""
 
 import numpy as np
@@ -23,7 +23,7 @@ def _jump_rows(arc, rule_times):
     return np.array(rows)
 
 
-# -- section 6.3: triggering the input ------------------------------------------------
+# -- section 7.3: triggering the input ------------------------------------------------
 
 
 def test_static_input_rule_keeps_the_error_under_the_linear_iss_bound():
@@ -63,7 +63,7 @@ def test_dynamic_input_rule_triggers_exactly_on_its_threshold():
     u = pb.u(a.t[rows])
     e_u = a.x[rows][:, ch.held] - u
     g = rule_u.trigger(a.t[rows], e_u, a.x[rows][:, ch.rule_state])
-    np.testing.assert_allclose(g, 0.0, atol=1e-7)  # eq. (53) holds with equality at each send
+    np.testing.assert_allclose(g, 0.0, atol=1e-7)  # eq. (54) holds with equality at each send
     after = a.x[rows + 1]
     np.testing.assert_allclose(after[:, ch.held], u, atol=1e-12)  # ubar+ = u
     np.testing.assert_allclose(after[:, ch.rule_state], 0.5 * a.x[rows][:, ch.rule_state])  # eta_u+ = b eta_u

@@ -1,4 +1,4 @@
-"""The paper's case study (section 7): cross-checks, defining properties, reference values."""
+"""The paper's case study (section 8): cross-checks, defining properties, reference values."""
 
 import numpy as np
 import pytest
@@ -39,7 +39,7 @@ def test_engine_and_scipy_backend_agree_on_random_runs():
 
 
 def test_minimum_inter_event_times_match_the_paper(paper_run):
-    # Section 7: "the minimum inter-event time measured is 0.201 s for sensor 1 and
+    # Section 8: "the minimum inter-event time measured is 0.201 s for sensor 1 and
     # 0.112 s for sensor 2" (three decimals, so we compare rounded values).
     mins = min_inter_event_time(paper_run)[0]
     assert np.round(mins, 3).tolist() == [0.201, 0.112]
@@ -118,7 +118,7 @@ def test_no_noise_and_no_disturbance():
 
 
 def test_paper_matrices_and_initial_conditions():
-    # Transcribed from section 7 of the paper.
+    # Transcribed from section 8 of the paper.
     assert A[1].tolist() == [-48.6, -1.25, 48.6, 0.0]
     assert A[3].tolist() == [19.5, 0.0, -19.5, 0.0]
     assert B.tolist() == [0.0, 21.6, 0.0, 0.0] and G.tolist() == [0.0, 0.0, 0.0, -1.0]

@@ -1,4 +1,4 @@
-"""The generalized rule (section 6.1), send-on-delta, and the noise condition of section 6.2."""
+"""The generalized rule (section 7.1), send-on-delta, and the noise condition of section 7.2."""
 
 import warnings
 

@@ -25,7 +25,7 @@ from etobs.examples import X0_PAPER, robot_arm
 from etobs.experiments.common import MAX_GRID_POINTS
 from etobs.hybrid import SaveAt, SolverOptions
 
-#: The paper's measured minimum inter-event times (section 7), sensor 1 and sensor 2.
+#: The paper's measured minimum inter-event times (section 8), sensor 1 and sensor 2.
 PAPER_MIN_INTER_EVENT = (0.201, 0.112)
 #: Spacing of the grid on which max |x - xhat| is taken.
 GRID_STEP = 1e-3
@@ -51,7 +51,7 @@ def add_parser(sub: Any) -> None:
     cases = demo.add_subparsers(dest="case", required=True, metavar="CASE")
     p = cases.add_parser(
         "robot-arm",
-        help="the paper's flexible-joint robot arm (section 7)",
+        help="the paper's flexible-joint robot arm (section 8)",
         description="Simulate the paper's robot-arm case study and write its three figures and summary.json.",
     )
     p.add_argument("--out", type=folder, default=Path("robot-arm-out"), help="output folder")

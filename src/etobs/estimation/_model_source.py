@@ -427,7 +427,7 @@ def _estimate(c: _Code, at: _Where) -> None:
 
 
 def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
-    """``dq = q'`` (eq. (2), (7), (14), (44), (50), (52)) in the entries below ``n_flow``."""
+    """``dq = q'`` (eq. (2), (7), (14), (44), (50), (53)) in the entries below ``n_flow``."""
     w, nx, nz, ny, nu, nv = at.w, at.nx, at.nz, at.ny, at.nu, at.nv
     c.lines(_signal(0, at.signals[0], w["u"]))
     c.lines(_signal(1, at.signals[1], w["v"]))
@@ -474,7 +474,7 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
 
 
 def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
-    """Every node's trigger function (eq. (15), (45), (53)): the node sends when ``g_i >= 0``.
+    """Every node's trigger function (eq. (15), (45), (54)): the node sends when ``g_i >= 0``.
 
     With a network the deliveries come first: ``g[c]`` is zero when a packet of node
     ``c`` arrives, and the nodes' triggers follow (:mod:`etobs.estimation.assembly`).

@@ -1,4 +1,4 @@
-"""The paper's metrics (section 7): transmissions, inter-event times, estimation error."""
+"""The paper's metrics (section 8): transmissions, inter-event times, estimation error."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def transmission_counts(
     result : EstimationResult
     window : (float, float), optional
     nodes : {"outputs", "inputs", "all"}
-        The output nodes, the input nodes (section 6.3), or both (outputs first).
+        The output nodes, the input nodes (section 7.3), or both (outputs first).
 
     Returns
     -------
@@ -63,7 +63,7 @@ def transmission_counts(
 
 
 def input_transmission_counts(result: EstimationResult, window: Any = None) -> np.ndarray:
-    """Transmissions of each input node (section 6.3), counted apart from the outputs'.
+    """Transmissions of each input node (section 7.3), counted apart from the outputs'.
 
     Same as ``transmission_counts(result, window, nodes="inputs")``.
     """

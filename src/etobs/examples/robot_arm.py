@@ -1,4 +1,4 @@
-"""The flexible-joint robot arm of the paper's case study (section 7).
+"""The flexible-joint robot arm of the paper's case study (section 8).
 
 ``x' = A x + B u + G*3.3*sin(x_3) + v``, ``y = C x + m`` with ``u = sin t``,
 ``v = 0.02 (0, 1, 0, 1) sin(0.4 t)`` and ``m = 0.01 (0, 1) sin(0.3 t)``; observer
@@ -30,7 +30,7 @@ A = np.array(
 B = np.array([0.0, 21.6, 0.0, 0.0])
 G = np.array([0.0, 0.0, 0.0, -1.0])
 C = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
-#: The observer gain printed in the paper (section 7).
+#: The observer gain printed in the paper (section 8).
 L_PAPER = np.array([[0.58, -42.96], [-4.67, 2.83], [3.16, 49.25], [16.34, 88.46]])
 #: The initial condition of the paper's figures.
 X0_PAPER = (3.0, 2.0, 3.0, -2.0)

@@ -61,7 +61,7 @@ _MESSAGES = {
         "the jumps piled up in time: more than `SolverOptions(zeno_jumps=...)` jumps within "
         "`zeno_span * max(1, |t|)` seconds (Zeno behaviour, or jumps closer together than the "
         "solver resolves in time). Check that every eps is > 0 and not tiny next to gamma(|e|) "
-        "(Theorem 3's minimum inter-event time is gamma_i^-1(eps_i) / E), that no rule stays "
+        "(Theorem 4's minimum inter-event time is gamma_i^-1(eps_i) / E), that no rule stays "
         "in its jump set after its own jump, or change `zeno_jumps`/`zeno_span`"
     ),
 }

@@ -1,13 +1,14 @@
-"""The generalized dynamic rule of section 6.1 (eq. (44)--(45)).
+"""The generalized dynamic rule of section 7.1 (eq. (44)--(45)).
 
 ``eta' = -alpha_check(eta) + gamma_check(|e|)`` along flows, ``eta+ = b eta`` at the
-node's transmission, and transmission when::
+node's transmission, and transmission when (the paper prints (45) with ``<=``, under which
+a node would send at ``e = 0`` and not when ``|e|`` grows; etobs reads it with ``>=``, as (15))::
 
     gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps     (45)
 
 where ``d'`` (the paper's fraktur d) is non-decreasing, continuous, and zero only at
 zero, ``d(s) = int_0^s d'``, and ``sigma`` is in ``(0, 1)``. The Lyapunov function is
-then ``U = V + sum_i d_i(eta_i)`` (section 6.1).
+then ``U = V + sum_i d_i(eta_i)`` (section 7.1).
 """
 
 from __future__ import annotations
@@ -24,12 +25,12 @@ from etobs.model.rules import GENERALIZED, EngineForm, EtaRule, _norm
 
 @dataclass(frozen=True)
 class GeneralizedRule(EtaRule):
-    """Section 6.1's rule: any ``alpha_check``, ``gamma_check`` and weight ``d'``.
+    """Section 7.1's rule: any ``alpha_check``, ``gamma_check`` and weight ``d'``.
 
     Parameters
     ----------
     gamma : KFunction
-        ``gamma_i`` of Assumption 1.
+        ``gamma_i`` of Assumption 2.
     gamma_check, alpha_check : KFunction
         The filter ``eta' = -alpha_check(eta) + gamma_check(|e|)`` (eq. (44));
         ``alpha_check`` defaults to ``Linear(1.0)``.

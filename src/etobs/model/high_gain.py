@@ -5,7 +5,7 @@ integrators with a nonlinearity in the last equation), the observer
 ``xhat' = f(t, xhat, u) + L (ybar - xhat_1)`` (``f`` written for one run) with
 ``L = (theta k_1, theta^2 k_2, ..., theta^n k_n)`` has error dynamics
 ``theta``-times faster than those of the Hurwitz companion matrix of ``k``; for
-``theta`` large enough (globally Lipschitz ``phi``) it satisfies Assumption 1 with
+``theta`` large enough (globally Lipschitz ``phi``) it satisfies Assumption 2 with
 quadratic gains (Khalil & Praly 2014). The default ``k`` places every eigenvalue of the
 companion matrix at ``-1`` (binomial coefficients).
 """

@@ -8,7 +8,7 @@ filter run on the held outputs ``ybar`` is (Kalman--Bucy, linearized at the esti
 
 with ``F = df/dx`` and ``H = dh/dx`` at ``xhat``. ``z = (xhat, vec(P))`` has
 ``n_x + n_x^2`` entries and ``psi(z) = xhat``. The EKF is one of the observers the paper
-names as satisfying its Assumption 1 under conditions (section 3, after Bernard et
+names as satisfying its Assumption 2 under conditions (section 3.2, after Bernard et
 al. 2022); etobs does not check those conditions for it.
 """
 

@@ -31,11 +31,11 @@ class Node:
 
 @dataclass(frozen=True)
 class InputNode:
-    """An input node (section 6.3): sends the plant input ``u[inputs]`` to the observer.
+    """An input node (section 7.3): sends the plant input ``u[inputs]`` to the observer.
 
     The observer then runs on the held ``ubar`` in place of ``u`` for these components,
     eq. (50), and the node transmits by its own rule acting on ``e_u = ubar - u``,
-    eq. (52)--(53) (e.g. a :class:`~etobs.model.DynamicRule` with ``gamma_u``,
+    eq. (53)--(54) (e.g. a :class:`~etobs.model.DynamicRule` with ``gamma_u``,
     ``alpha_u``, ``sigma_u``, ``c_u``, ``b_u``, ``eps_u``). Components of ``u`` that no
     input node sends reach the observer exactly, as in the base setting.
     """
