@@ -304,7 +304,9 @@ def citations_in(text: str, path: str = "<text>", wrapped: bool = False) -> list
         first = text.rfind("\n", 0, m.start()) + 1
         if wrapped:  # a paragraph's line before is part of the sentence (not so in code or tables)
             before = text.rfind("\n", 0, max(0, first - 1)) + 1
-            if not {text[before:first].strip()[:1], text[first : m.start()].strip()[:1]} & {"", "|", "#"}:
+            line_end = text.find("\n", first)
+            this = text[first : len(text) if line_end < 0 else line_end]
+            if not {text[before:first].strip()[:1], this.strip()[:1]} & {"", "|", "#"}:
                 first = before
         last = text.find("\n", m.end())
         last = len(text) if last < 0 else last
