@@ -240,7 +240,7 @@ def plot_hybrid_arc(
     if log if log is not None else name == "error":
         ax.set_yscale("log")
     ax.autoscale_view()
-    ax.set_ylabel(rows.labels[0] if single else name)
+    ax.set_ylabel(rows.labels[0] if single else f"${_VARIABLES[name]}$")
     if not single:
         ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(rows.labels)))
     ax.grid(alpha=0.3, which="both")
