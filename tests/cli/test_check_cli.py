@@ -1,5 +1,8 @@
 import json
+import re
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("cvxpy")
@@ -108,3 +111,96 @@ def test_check_refuses_a_problem_the_theorems_do_not_cover(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "etobs: error: the paper's results (Theorems 1-4) do not cover this problem" in err
     assert "the observer-copy hold" in err and "Traceback" not in err
+
+
+# --- etobs check and certify agree (issue 15): the chain of tests/design/chain.py ---------------
+
+CHAIN = Path(__file__).parents[1] / "design" / "chain.py"
+
+
+def _chain_design():
+    from etobs.design import certify, observer_gain, propose_rules, quadratic_iss_gains
+    from tests.design import chain
+
+    gain = observer_gain(chain.A, chain.C, objective="max_decay", max_gain=5.0)
+    iss = quadratic_iss_gains(gain, chain.NODES, c_v=0.1, c=[0.1] * 3)
+    rules = propose_rules(iss, sigma=[2.0] * 3, c=[0.05] * 3, a_U=0.5 * iss.a, mu=0.2).rules
+    params = {"L": gain.L.tolist(), **chain.rule_params(rules)}
+    cert = certify(chain.chain(**params), iss, E=5.0, disturbance=0.02 * 3**0.5)
+    return gain, params, cert
+
+
+def _chain_spec(tmp_path, gain, params, P=None):
+    from tests.design import chain
+
+    # Python's repr of a list of floats is TOML; the floats survive the round trip exactly
+    table = ", ".join(f"{k} = {v!r}" for k, v in params.items())
+    spec = tmp_path / "chain.toml"
+    spec.write_text(
+        f'[system]\nfactory = "{CHAIN}:chain"\nparams = {{ {table} }}\n'
+        f"[observer]\nA = {chain.A.tolist()}\nC = {chain.C.tolist()}\nL = {gain.L.tolist()}\n"
+        + ("" if P is None else f"P = {P.tolist()}\n")
+        + f"c_v = 0.1\nc = [0.1, 0.1, 0.1]\n[guarantees]\nE = 5.0\ndisturbance = {0.02 * 3**0.5!r}\n"
+    )
+    return str(spec)
+
+
+def test_check_with_the_designed_P_gives_certify_s_certificate(tmp_path, capsys):
+    gain, params, cert = _chain_design()
+    assert main(["check", _chain_spec(tmp_path, gain, params, P=gain.P), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    py = cert.to_dict()
+    # the same P, gains and numbers; only the words on where P came from differ
+    assert cli["iss"].pop("P_origin") == "given with L (re-checked with eigenvalues)"
+    assert py["iss"].pop("P_origin") == "designed together with L by observer_gain (objective 'max_decay')"
+    assert cli == py
+    assert cli["iss"]["P"] == gain.P.tolist() and cli["error_bound"] == cert.error_bound
+
+
+def test_check_without_P_says_which_P_it_used(tmp_path, capsys):
+    # before: the CLI silently certified with another feasible P for the same L, and its
+    # bound differed from certify's with the designed P (2.57 vs 2.15 on the issue's chain)
+    gain, params, cert = _chain_design()
+    assert main(["check", _chain_spec(tmp_path, gain, params)]) == 0
+    out = capsys.readouterr().out
+    assert "P found by check_gain for the given L (the trace-1 P with the largest common decrease" in out
+    assert "note: no observer.P given: P was found by check_gain for observer.L" in out
+    assert "give observer.P (your design's ObserverGain.P)" in out
+    bound = float(out.split("ultimate bound on |x - xhat|: ")[1].split()[0])
+    assert bound != pytest.approx(cert.error_bound, rel=1e-2)  # another P, another bound: both valid
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            "P_design",
+            r"`observer.P` goes with a given `observer.L` \(a matrix or 'paper'\); with L = 'design'",
+        ),
+        (
+            "P_small",
+            r"`observer.L` with `observer.P` fails the LMI re-check: the given P does not fit L and Q",
+        ),
+        ("P_shape", r"`observer`: `P` has shape \(2, 2\); expected \(6, 6\)"),
+        ("P_asym", r"`observer`: `P` must be symmetric; got P - P' with largest entry 1"),
+        ("P_text", r"`observer.P` must be"),
+    ],
+)
+def test_check_refuses_a_bad_P(tmp_path, capsys, change, message):
+    gain, params, _ = _chain_design()
+    P = {"P_small": 0.01 * np.eye(6), "P_shape": np.eye(2), "P_asym": np.triu(np.ones((6, 6)))}.get(
+        change, gain.P
+    )
+    path = _chain_spec(tmp_path, gain, params, P=P)
+    text = Path(path).read_text()
+    if change == "P_design":
+        text = text.replace(f"\nL = {gain.L.tolist()}", '\nL = "design"')
+    if change == "P_text":
+        text = text.replace(f"P = {gain.P.tolist()}", 'P = "designed"')
+    Path(path).write_text(text)
+    with pytest.raises(SystemExit) as exc:
+        main(["check", path])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert "Traceback" not in err

@@ -1,5 +1,6 @@
-"""ISS gains (section 7), the certificate of Theorems 1-3 and the noise condition, tied to simulation."""
+"""ISS gains (section 8), the certificate of Theorems 1, 2 and 4 and the noise condition, tied to simulation."""
 
+import json
 import math
 
 import numpy as np
@@ -37,8 +38,8 @@ def test_gains_are_the_papers_formulas():
     e=st.lists(st.floats(-3, 3), min_size=2, max_size=2),
     v=st.lists(st.floats(-1, 1), min_size=4, max_size=4),
 )
-def test_assumption_1_holds_with_these_gains(x, xi, e, v):
-    # eq. (12) for V = xi' P xi along the robot arm and observer (57) fed with ybar = y + e
+def test_assumption_2_holds_with_these_gains(x, xi, e, v):
+    # eq. (13) for V = xi' P xi along the robot arm and observer (57) fed with ybar = y + e
     x, xi, e, v = (np.array(a) for a in (x, xi, e, v))
     xhat = x - xi
     dxi = A @ xi + G * SECTOR * (np.sin(x[2]) - np.sin(xhat[2])) + v - L_PAPER @ (C @ xi + e)
@@ -77,7 +78,7 @@ def test_certificate_of_the_papers_parameters():
     assert [nd.d_star for nd in cert.nodes] == pytest.approx([1500.0, 4000.0])
     assert [nd.delta for nd in cert.nodes] == pytest.approx([3000 - 600 * 4, 8000 - 800 * 9])
     assert cert.nu == pytest.approx(130.0) and cert.nu_inf == pytest.approx(75.0)
-    # Theorem 3 with section 6.2's noise: tau_i = (gamma^{-1}(eps) - 2 m_i)/E_i, gamma^{-1}(10) = sqrt(2)
+    # Theorem 4 with section 7.2's noise: tau_i = (gamma^{-1}(eps) - 2 m_i)/E_i, gamma^{-1}(10) = sqrt(2)
     assert [nd.tau for nd in cert.nodes] == pytest.approx([math.sqrt(2) / 10, (math.sqrt(2) - 0.02) / 20])
     # Theorem 2: a_U = 0.9 min(a, 2 (1 - 0.6), 3 (1 - 0.8)); mu = (1 + max d_i c_i) sum eps / a_U
     a_U = 0.9 * min(ISS.a, 0.8, 0.6)
@@ -98,10 +99,10 @@ def test_a_violated_condition_names_the_node():
     (fail,) = cert.failures()
     assert fail.node == 1 and fail.name == "sigma*c < 1 (Theorem 1)" and "1.2" in fail.detail
     assert math.isnan(cert.nu)
-    with pytest.warns(RuntimeWarning, match="section 6.2's condition fails"):
+    with pytest.warns(RuntimeWarning, match="section 7.2's condition fails"):
         problem = robot_arm(eps=(10.0, 1e-4))
     noisy = certify(problem, noise=[0.0, 0.01])
-    assert [(c.node, c.name) for c in noisy.failures()] == [(1, "eps > gamma(2 m) (section 6.2)")]
+    assert [(c.node, c.name) for c in noisy.failures()] == [(1, "eps > gamma(2 m) (section 7.2)")]
     fast = certify(robot_arm(), ISS, a_U=0.7)
     assert [c.name for c in fast.failures()] == ["a_U <= a and a_i > a_U / (1 - sigma_i c_i) (Theorem 2)"]
 
@@ -118,7 +119,7 @@ def test_certify_rejects_bad_input():
 
 
 def test_observed_inter_event_times_are_never_below_tau():
-    # Theorem 3 on simulated runs, with E_i estimated on the same runs (plus 5 % for the
+    # Theorem 4 on simulated runs, with E_i estimated on the same runs (plus 5 % for the
     # grid); no measurement noise: the rule sees y itself
     pb = robot_arm(noise=False)
     x0 = np.vstack([X0_PAPER, random_initial_states(5, seed=3)])
@@ -241,7 +242,7 @@ def test_propose_rules_rejects_impossible_requests():
 @settings(max_examples=10, deadline=None)
 @given(eps=st.floats(1e-4, 1e-1), sigma=st.floats(0.0, 5.0), x0=st.floats(0.5, 5.0))
 def test_transmissions_stop_when_the_output_stays_in_a_small_ball(eps, sigma, x0):
-    # Lemma 2: once |y(t) - y*| < gamma^{-1}(eps)/2 for all later t, at most one more
+    # Lemma 1: once |y(t) - y*| < gamma^{-1}(eps)/2 for all later t, at most one more
     # transmission (the one that resets e) happens. Plant x' = -x, y = x -> y* = 0.
     from etobs import DynamicRule, EstimationProblem, Linear, Node, Plant, Quadratic, luenberger
 
@@ -257,7 +258,7 @@ def test_transmissions_stop_when_the_output_stays_in_a_small_ball(eps, sigma, x0
 
 
 def test_noise_shortens_tau_and_enters_the_error_bound():
-    # section 6.2: |e~| <= E s + 2 m after a transmission, so tau = (gamma^{-1}(eps) - 2 m) / E;
+    # section 7.2: |e~| <= E s + 2 m after a transmission, so tau = (gamma^{-1}(eps) - 2 m) / E;
     # the observer's error is e~ + m: lambda = min ell / (2 k), plus sum 2 lambda k m^2 / a_U
     quiet = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.0])
     noisy = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
@@ -320,3 +321,56 @@ def test_an_ideal_network_is_covered():
 
     for network in (Network(Link()), Network(Link(loss=0.0, capacity=2))):
         assert certify(replace(robot_arm(), network=network), ISS).ok
+
+
+def test_a_certificate_carries_the_P_and_gains_it_rests_on():
+    # before: nothing in a certificate said which P (and so which ISS gains) it used
+    cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
+    assert cert.iss is ISS and np.array_equal(cert.iss.P, GAIN.P)
+    data = json.loads(cert.to_json())
+    assert data["iss"]["P"] == GAIN.P.tolist() and data["iss"]["k"] == list(ISS.k)
+    assert data["iss"]["c_v"] == 0.1 and data["iss"]["c"] == [0.1, 0.1]
+    assert data["iss"]["P_origin"].startswith("found by check_gain for the given L")
+    text = cert.format()
+    assert "rests on the ISS gains (Assumption 2) alpha(s) = 0.19" in text
+    assert "P found by check_gain for the given L" in text
+    assert f"{GAIN.P[0, 0]:11.6g}" in text.split("P found by check_gain")[1]
+    assert certify(robot_arm(), E=10.0).iss is None and certify(robot_arm(), E=10.0).to_dict()["iss"] is None
+
+
+def test_certificate_repr_is_short_and_names_failures():
+    cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
+    lines = repr(cert).splitlines()
+    assert lines[0] == "Certificate: all conditions hold" and len(lines) == 3
+    assert lines[1] == "  nu = 130, a_U = 0.1719, mu = 768.5, error bound = 1.394e+04, min tau [s] = 0.06971"
+    assert lines[2] == f"  rests on ISS gains from P: {GAIN.origin}"
+    html = cert._repr_html_()
+    assert html.startswith("<table>") and "<td>all conditions hold</td>" in html and "&#x27;" not in html[:20]
+    with pytest.warns(RuntimeWarning, match="Theorem 1 needs"):
+        bad = certify(robot_arm(sigma=(600.0, 1200.0)), E=10.0)
+    lines = repr(bad).splitlines()
+    assert lines[0] == f"Certificate: 1 of {len(bad.conditions)} conditions fail"
+    assert lines[1] == "  FAIL sigma*c < 1 (Theorem 1) [node 1]: sigma*c = 1200*0.001 = 1.2"
+    assert "<th style='text-align:left'>FAIL [node 1]</th>" in bad._repr_html_()
+
+
+def test_check_gain_with_a_given_P_only_rechecks_it():
+    again = check_gain(A, C, L_PAPER, VERTS, P=GAIN.P)
+    assert again.ok and again.solver_status == "P given" and np.array_equal(again.P, GAIN.P)
+    assert again.origin == "given with L (re-checked with eigenvalues)"
+    assert quadratic_iss_gains(again, [[0], [1]], c_v=0.1, c=[0.1, 0.1]).k == ISS.k
+    small = check_gain(A, C, L_PAPER, VERTS, P=1e-3 * np.eye(4))
+    assert not small.ok and "the given P does not fit L and Q" in small.notes[0]
+    with pytest.raises(InputError, match=r"`P` must be symmetric; got P - P' with largest entry 1"):
+        check_gain(A, C, L_PAPER, VERTS, P=np.triu(np.ones((4, 4))))
+    with pytest.raises(InputError, match=r"`P` has shape \(2, 2\); expected \(4, 4\)"):
+        check_gain(A, C, L_PAPER, VERTS, P=np.eye(2))
+
+
+def test_iss_gains_refuse_a_P_that_is_not_theirs():
+    from dataclasses import replace
+
+    with pytest.raises(
+        InputError, match=r"`P` has extreme eigenvalues \(0.19\d+, 3.6\d+\); got lambda_min_P = 1"
+    ):
+        replace(ISS, lambda_min_P=1.0)

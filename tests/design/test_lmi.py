@@ -1,4 +1,4 @@
-"""LMI observer design (section 7): feasibility, the eigenvalue re-check, the paper's gain."""
+"""LMI observer design (section 8): feasibility, the eigenvalue re-check, the paper's gain."""
 
 import numpy as np
 import pytest
@@ -17,7 +17,7 @@ VERTS = slope_vertices(G[:, None], H, [(-SECTOR, SECTOR)])
 
 def test_vertices_are_the_papers_G1_G2():
     G1 = np.zeros((4, 4))
-    G1[3, 2] = 3.3  # the paper's G_1 (section 7); G_2 = -G_1
+    G1[3, 2] = 3.3  # the paper's G_1 (section 8); G_2 = -G_1
     assert len(VERTS) == 2
     np.testing.assert_array_equal(VERTS[0], G1)
     np.testing.assert_array_equal(VERTS[1], -G1)

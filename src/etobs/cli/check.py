@@ -10,7 +10,11 @@ The spec is a TOML file (or the name of a packaged one, ``robot_arm``)::
     structure = "robot_arm"  # A, C and the slope vertices of a registered example, or
     # A = [[...]], C = [[...]], G = [[...]], H = [[...]], slopes = [[-3.3, 3.3]]
     L = "paper"              # "paper" (the example's printed gain), "design", or a matrix
-    c_v = 0.1                # split constants of the ISS gains (section 7)
+    # P = [[...]]            # optional, with a given L: the Lyapunov matrix of your design
+    # (ObserverGain.P), symmetric positive definite, shape (n_x, n_x); it is only re-checked.
+    # Without it check_gain finds a P for L, which gives other gains and bounds than yours;
+    # the report says which P it used and how it was found.
+    c_v = 0.1                # split constants of the ISS gains (section 8)
     c = [0.1, 0.1]
 
     [guarantees]             # optional
@@ -18,7 +22,7 @@ The spec is a TOML file (or the name of a packaged one, ``robot_arm``)::
     # E_estimate = { low = [0, 0, 0, 0], high = [20, 10, 20, 10], runs = 20, margin = 1.2 }
     # (the largest rate seen on seeded runs from that box, times the margin: a lower
     # estimate; also t_end = 30.0, seed = 0)
-    noise = [0.0, 0.01]      # bounds m_i of the measurement noise (section 6.2)
+    noise = [0.0, 0.01]      # bounds m_i of the measurement noise (section 7.2)
     disturbance = 0.0283     # bound on |v| for the error bound
     a_U = 0.15               # rate asked of Theorem 2 (default: 0.9 x the largest admissible)
     d = [3000.0, 8000.0]     # d_i of U (default 2 d_i*)
@@ -34,6 +38,7 @@ import contextlib
 import inspect
 import sys
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -70,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     iss = None
     if "observer" in top:
         with _table("observer"):
-            iss, L = _iss(top["observer"], problem)
+            iss, L, p_note = _iss(top["observer"], problem)
         # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
         if "L" not in params and "L" in inspect.signature(resolve_factory(system["factory"])).parameters:
             problem = make_problem(system["factory"], {**params, "L": L}, "system.params with observer.L")
@@ -81,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         {"E", "E_estimate", "noise", "disturbance", "a_U", "d"},
     )
     cert = _certify(problem, iss, g)  # its errors name the key (`noise`, `E`) or the problem
+    if iss is not None and p_note:
+        cert = replace(cert, notes=(*cert.notes, p_note))
     print(cert.to_json() if args.json else cert.format())
     if not cert.ok and not args.json:
         for c in cert.failures():
@@ -127,11 +134,11 @@ def _load(name: str) -> dict[str, Any]:
     return load_toml(name, PACKAGED, "etobs.design")
 
 
-def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
-    """The ISS gains of the spec's observer, and its gain ``L``."""
+def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
+    """The ISS gains of the spec's observer, its gain ``L``, and a note on how ``P`` was found."""
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
 
-    keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q"}
+    keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q", "P"}
     needed = {
         "L": "'design', 'paper' or a matrix",
         "c_v": "a number > 0",
@@ -161,17 +168,32 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray]:
     Q = _matrix("observer.Q", obs["Q"]) if "Q" in obs else None
     if not isinstance(obs["L"], list) and obs["L"] not in ("design", "paper"):
         raise SpecError(f"`observer.L` must be 'design', 'paper' or a matrix; got {shown(obs['L'])}")
+    P = _matrix("observer.P", obs["P"]) if "P" in obs else None
+    note = ""
     if obs["L"] == "design":
+        if P is not None:
+            raise SpecError(
+                "`observer.P` goes with a given `observer.L` (a matrix or 'paper'); with L = 'design' "
+                "the design finds its own P"
+            )
         gain = observer_gain(A, C, verts, Q=Q)
-    elif obs["L"] == "paper":
-        if paper_L is None:
-            raise SpecError("`observer.L` = 'paper' needs `observer.structure` (a registered example)")
-        gain = check_gain(A, C, paper_L, verts, Q=Q)
     else:
-        gain = check_gain(A, C, _matrix("observer.L", obs["L"]), verts, Q=Q)
+        if obs["L"] == "paper" and paper_L is None:
+            raise SpecError("`observer.L` = 'paper' needs `observer.structure` (a registered example)")
+        L = paper_L if obs["L"] == "paper" else _matrix("observer.L", obs["L"])
+        gain = check_gain(A, C, L, verts, P=P, Q=Q)  # with P: only re-checked, as certify's P
+        if P is None:
+            note = (
+                "no observer.P given: P was found by check_gain for observer.L; the gains and the "
+                "error bound depend on P, so give observer.P (your design's ObserverGain.P) to certify "
+                "with it (it may give a smaller bound)"
+            )
+    if not gain.ok:  # the LMIs fail: no ISS gains, so bad input rather than a failed condition
+        what = "`observer.L` with `observer.P`" if P is not None else "`observer.L`"
+        raise SpecError(f"{what} fails the LMI re-check: {'; '.join(gain.notes) or 'vertex residuals >= 0'}")
     nodes = [list(nd.outputs) for nd in problem.nodes]
     c_v, c = _number("observer.c_v", obs["c_v"]), _numbers("observer.c", obs["c"])
-    return quadratic_iss_gains(gain, nodes, c_v=c_v, c=c), gain.L
+    return quadratic_iss_gains(gain, nodes, c_v=c_v, c=c), gain.L, note
 
 
 def _numbers(key: str, value: Any) -> list[float]:
@@ -215,4 +237,5 @@ def _estimate(problem: Any, table: Any) -> list[float]:
     margin = _number(f"{where}.margin", t.get("margin", 1.2), lower=1.0)
     rng = np.random.default_rng(int(_number(f"{where}.seed", t.get("seed", 0), lower=0, integer=True)))
     x0 = low + rng.uniform(size=(runs, low.size)) * (high - low)
-    return [margin * float(e) for e in estimate_output_rate(problem, x0, t_end, grid_step=1e-2)]
+    rates = estimate_output_rate(problem, x0, t_end, grid_step=1e-2)  # a progress bar on a terminal
+    return [margin * float(e) for e in rates]

@@ -1,16 +1,16 @@
-"""What the paper's theorems guarantee for given triggering parameters (sections 4–6).
+"""What the paper's theorems guarantee for given triggering parameters (sections 5, 6.2, 7.2).
 
 :func:`certify` checks the conditions of Theorem 1 (``sigma_i c_i < 1``, ``d_i > d_i*``)
 and reports ``d_i*``, ``delta_i`` and ``nu``; for linear ``alpha`` and ``alpha_i`` it
 applies Theorem 2 (the decay rate ``a_U`` and the bound ``mu``); it gives the individual
-minimum inter-event time ``tau_i = gamma_i^{-1}(eps_i) / E`` (Theorem 3) for a bound
-``E`` on ``|dh_i/dx f_p|`` and checks the noise condition ``eps_i > gamma_i(2 m_i)``
-(section 6.2). The theorems take ``sigma_i* = sigma_i`` and ``c_i* = c_i`` here, the
-tightest choice.
+minimum inter-event time ``tau_i = gamma_i^{-1}(eps_i) / E`` (Theorem 4) for a bound
+``E`` on ``|dh_i/dx f_p|`` (eq. (36)) and checks the noise condition
+``eps_i > gamma_i(2 m_i)`` (section 7.2). The theorems take ``sigma_i* = sigma_i`` and
+``c_i* = c_i`` here, the tightest choice.
 
 The numbers are in the units of the ``gamma_i`` the rules use. When the ISS gains of
 the observer are known and quadratic (:class:`~etobs.design.iss.QuadraticISS`,
-``gamma_i(s) = k_i s^2``) and the rules use ``ell_i s^2``, Assumption 1 holds for
+``gamma_i(s) = k_i s^2``) and the rules use ``ell_i s^2``, Assumption 2 holds for
 ``V' = lambda V`` with ``lambda = min_i ell_i / k_i``: the same linear rate ``a``,
 ``gamma'_i = lambda k_i <= ell_i`` and ``theta' = lambda theta`` (Remark 1, made
 quantitative by scaling ``V``). That turns ``mu`` into a bound on the estimation error:
@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -51,7 +51,7 @@ class Condition:
 
 @dataclass(frozen=True)
 class NodeNumbers:
-    """Theorem 1 and 3 numbers of one node (``nan`` where they do not apply)."""
+    """Theorem 1 and 4 numbers of one node (``nan`` where they do not apply)."""
 
     node: int
     sigma: float
@@ -64,7 +64,7 @@ class NodeNumbers:
     tau: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Certificate:
     """The conditions checked and the numbers guaranteed; ``ok`` if every condition holds.
 
@@ -73,7 +73,7 @@ class Certificate:
     conditions : tuple of Condition
     nodes : tuple of NodeNumbers
     nu : float
-        Theorem 1's ``nu = sum_i (1 + d_i c_i) eps_i`` (eq. (25) holds with it).
+        Theorem 1's ``nu = sum_i (1 + d_i c_i) eps_i`` (eq. (26) holds with it).
     nu_inf : float
         Its infimum over admissible ``d_i``: ``sum_i eps_i / (1 - sigma_i c_i)``.
     scale : float
@@ -85,6 +85,10 @@ class Certificate:
     error_bound : float
         Ultimate bound on ``|x - xhat|`` from Theorem 2 and the ISS gains, for the
         disturbance bound given (``nan`` when not available).
+    iss : QuadraticISS or None
+        The ISS gains the numbers rest on, with the ``P`` they come from and how it was
+        found (``None`` when certified without ISS gains). Another ``P`` for the same
+        ``L`` gives other gains and another error bound.
 
     """
 
@@ -98,6 +102,7 @@ class Certificate:
     error_bound: float = math.nan
     d_U: tuple[float, ...] = ()
     notes: tuple[str, ...] = field(default=())
+    iss: QuadraticISS | None = None
 
     @property
     def ok(self) -> bool:
@@ -112,6 +117,8 @@ class Certificate:
         """Plain data (NaN as ``None``), for ``--json``."""
 
         def clean(obj: Any) -> Any:
+            if isinstance(obj, np.ndarray):
+                return clean(obj.tolist())
             if isinstance(obj, float) and not math.isfinite(obj):
                 return None
             if isinstance(obj, dict):
@@ -132,7 +139,7 @@ class Certificate:
         for c in self.conditions:
             where = "" if c.node is None else f" [node {c.node}]"
             lines.append(f"  {'OK  ' if c.holds else 'FAIL'} {c.name}{where}: {c.detail}")
-        lines.append("per node (Theorem 1 with sigma* = sigma, c* = c; Theorem 3):")
+        lines.append("per node (Theorem 1 with sigma* = sigma, c* = c; Theorem 4):")
         lines.append("  node  sigma*c     d*          d           delta       tau [s]")
         for nd in self.nodes:
             nums = (nd.d_star, nd.d, nd.delta)
@@ -149,11 +156,80 @@ class Certificate:
             lines.append(f"V' = lambda V with lambda = {self.scale:.6g}")
         if math.isfinite(self.error_bound):
             lines.append(f"ultimate bound on |x - xhat|: {self.error_bound:.6g}")
+        lines += _rests_on(self.iss)
         lines += [f"note: {n}" for n in self.notes]
-        lines.append(
-            "certificate: " + ("all conditions hold" if self.ok else f"{len(self.failures())} failed")
-        )
+        lines.append(f"certificate: {self._verdict()}")
         return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.format()
+
+    def __repr__(self) -> str:
+        """A few lines: the verdict, the key figures, the ``P`` the numbers rest on."""
+        lines = [f"Certificate: {self._verdict()}"]
+        lines += [f"  FAIL {c.name}{_where(c)}: {c.detail}" for c in self.failures()]
+        lines.append("  " + ", ".join(f"{k} = {x}" for k, x in self._figures()))
+        if self.iss is not None:
+            lines.append(f"  rests on ISS gains from P: {self.iss.P_origin or 'given by hand'}")
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        """The same as :meth:`__repr__`, as a small HTML table (for notebooks)."""
+        from html import escape
+
+        rows = [("certificate", self._verdict())]
+        rows += [(f"FAIL{_where(c)}", f"{c.name}: {c.detail}") for c in self.failures()]
+        rows += self._figures()
+        if self.iss is not None:
+            rows.append(("P", self.iss.P_origin or "given by hand"))
+        body = "".join(
+            f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(x)}</td></tr>" for k, x in rows
+        )
+        return f"<table>{body}</table>"
+
+    def _verdict(self) -> str:
+        return (
+            "all conditions hold"
+            if self.ok
+            else f"{len(self.failures())} of {len(self.conditions)} conditions fail"
+        )
+
+    def _figures(self) -> list[tuple[str, str]]:
+        """The guaranteed numbers that are defined, formatted: ``nu``, ``a_U``, ``mu``, the bound, ``tau``."""
+        taus = [nd.tau for nd in self.nodes if math.isfinite(nd.tau)]
+        figures = [
+            ("nu", self.nu),
+            ("a_U", self.a_U),
+            ("mu", self.mu),
+            ("error bound", self.error_bound),
+            ("min tau [s]", min(taus) if taus else math.nan),
+        ]
+        return [(k, f"{x:.4g}") for k, x in figures if math.isfinite(x)]
+
+
+def _where(c: Condition) -> str:
+    return "" if c.node is None else f" [node {c.node}]"
+
+
+def _rests_on(iss: QuadraticISS | None) -> list[str]:
+    """The lines of :meth:`Certificate.format` that name the ISS gains and ``P`` used."""
+    if iss is None:
+        return []
+    k = ", ".join(f"{x:.6g}" for x in iss.k)
+    lines = [
+        f"rests on the ISS gains (Assumption 2) alpha(s) = {iss.a:.6g} s, theta(s) = {iss.k_v:.6g} s^2, "
+        f"gamma_i(s) = k_i s^2 with k = ({k})"
+    ]
+    if iss.c:
+        lines[-1] += f", split constants c_v = {iss.c_v:g}, c = ({', '.join(f'{x:g}' for x in iss.c)})"
+    if iss.P is None:
+        lines.append(
+            f"  from V = xi' P xi with lambda(P) in [{iss.lambda_min_P:.6g}, {iss.lambda_max_P:.6g}]"
+        )
+        return lines
+    lines.append(f"  from V = xi' P xi, P {iss.P_origin or 'given'}:")
+    lines += ["    [" + "  ".join(f"{x:11.6g}" for x in row) + "]" for row in np.asarray(iss.P)]
+    return lines
 
 
 def certify(
@@ -181,10 +257,10 @@ def certify(
         times :data:`DEFAULT_RATE_SHARE`.
     E : float or sequence of float, optional
         Bound on ``|dh_i/dx f_p|`` along solutions, common or per node (the proof of
-        Theorem 3 uses node ``i``'s own bound; see
+        Theorem 4 uses node ``i``'s own bound; see
         :func:`~etobs.design.rates.estimate_output_rate`).
     noise : sequence of float, optional
-        Bounds ``m_i`` on each node's measurement noise (section 6.2).
+        Bounds ``m_i`` on each node's measurement noise (section 7.2).
     disturbance : float
         Bound on ``|v|`` used in the error bound.
 
@@ -222,8 +298,8 @@ def certify(
             nu_inf += r.eps / (1 - sc)
         else:  # no d_i can satisfy Theorem 1
             d_star = di = delta = nu = nu_inf = math.nan
-        # Theorem 3; with noise the gap the rule sees restarts at 0 but |e~| <= E s + 2 m,
-        # so it needs (gamma^{-1}(eps) - 2 m) / E (section 6.2's semi-global version)
+        # Theorem 4; with noise the gap the rule sees restarts at 0 but |e~| <= E s + 2 m,
+        # so it needs (gamma^{-1}(eps) - 2 m) / E (section 7.2's semi-global version)
         reach = float(r.gamma.inverse(r.eps)) - 2 * ms[i]
         tau = reach / Es[i] if Es is not None and reach > 0 else math.nan
         nodes.append(NodeNumbers(i, sigma, c, r.eps, sc, d_star, di, delta, tau))
@@ -231,7 +307,7 @@ def certify(
             g2m = float(r.gamma(2 * ms[i]))
             conds.append(
                 Condition(
-                    "eps > gamma(2 m) (section 6.2)",
+                    "eps > gamma(2 m) (section 7.2)",
                     r.eps > g2m,
                     f"eps = {r.eps:g}, gamma(2m) = {g2m:.6g}",
                     i,
@@ -305,11 +381,10 @@ def _with_iss(
     disturbance: float,
     ms: list[float],
 ) -> Certificate:
-    from dataclasses import replace
-
     N = len(rules)
     if iss.n_nodes != N:
         raise InputError(f"`iss` has gains for {iss.n_nodes} nodes; the problem has {N}")
+    cert = replace(cert, iss=iss)
     conds = list(cert.conditions)
     notes = list(cert.notes)
     quad = all(isinstance(r.gamma, Quadratic) for r in rules)
@@ -380,7 +455,8 @@ class RuleProposal:
     """Rule parameters chosen to meet a requested ``nu`` (Theorem 1) or ``a_U, mu`` (Theorem 2).
 
     ``rules`` are ready for :class:`~etobs.model.Node`; ``gamma_i`` is the observer's ISS
-    gain ``k_i s^2`` itself, so the certificate applies with ``lambda = 1``.
+    gain ``k_i s^2`` itself, so the certificate applies with ``lambda = 1`` (``1/2`` with
+    noise, section 7.2).
     """
 
     rules: tuple[DynamicRule, ...]
@@ -407,7 +483,17 @@ def propose_rules(
     Give either ``nu`` (Theorem 1: ``sum_i (1 + d_i c_i) eps_i = nu`` with ``d_i = 2 d_i*``,
     equal shares per node) or ``a_U`` and ``mu`` (Theorem 2: ``a_i = 2 a_U / (1 - sigma_i
     c_i)`` unless given, ``eps_i = a_U mu / ((1 + varsigma) N)``). ``sigma_i c_i < 1`` is
-    required; larger ``sigma_i`` gives fewer transmissions for the same guarantee.
+    required.
+
+    What ``sigma_i`` buys: at a fixed ``eps_i`` a larger ``sigma_i`` holds transmissions
+    back (fewer on the robot arm and a linear chain). At a fixed guarantee, however,
+    ``eps_i`` falls as ``sigma_i c_i`` grows: it is divided by ``1 + d_i c_i`` (``nu``) or
+    ``1 + varsigma`` (``a_U, mu``), and with the default ``d_i`` and ``a_i`` both are
+    ``1 + 2 sigma_i c_i / (1 - sigma_i c_i)``. On those two systems that outweighed the
+    gain: for the same guarantee, ``sigma_i c_i = 0.9`` sent about 3.4 times as many
+    transmissions over 30 s as ``0.1``, and ``sigma_i = 0`` (a static rule) the fewest
+    of ``sigma_i c_i`` in 0, 0.1, 0.3, ..., 0.9 (``tests/design/test_propose_rules.py``
+    keeps the comparison). Compare candidates by simulation.
 
     Raises
     ------

@@ -1,24 +1,25 @@
-"""ISS gains of a Luenberger observer from its quadratic Lyapunov function (section 7).
+"""ISS gains of a Luenberger observer from its quadratic Lyapunov function (section 8).
 
 With ``V(xi) = xi' P xi`` for the estimation error ``xi = x - xhat`` and
 ``P A_cl,k + A_cl,k' P <= -Q`` at every vertex (:mod:`etobs.design.lmi`), the error of
 the observer fed with ``ybar = y + e`` obeys ``xi' = A_cl xi + v - sum_i L_i e_i``
 (``L_i``: the columns of ``L`` of node ``i``'s outputs). Young's inequality
-``2 |xi| r <= c |xi|^2 + r^2 / c`` on each cross term gives Assumption 1
-(eq. (12)) with, for any ``c_v, c_1, ..., c_N > 0`` with
+``2 |xi| r <= c |xi|^2 + r^2 / c`` on each cross term gives Assumption 2
+(eq. (13)) with, for any ``c_v, c_1, ..., c_N > 0`` with
 ``lambda_min(Q) - c_v - sum_i c_i > 0``::
 
     alpha(s)   = (lambda_min(Q) - c_v - sum_i c_i) / lambda_max(P) * s
     theta(s)   = ||P||^2 / c_v * s^2
     gamma_i(s) = ||P L_i||^2 / c_i * s^2
 
-which are the paper's gains (section 7).
+which are the paper's gains (section 8).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -29,7 +30,7 @@ from etobs.errors import InputError
 
 @dataclass(frozen=True)
 class QuadraticISS:
-    """Assumption 1 with linear ``alpha`` and quadratic ``theta``, ``gamma_i`` (eq. (12)).
+    """Assumption 2 with linear ``alpha`` and quadratic ``theta``, ``gamma_i`` (eq. (13)).
 
     Attributes
     ----------
@@ -41,6 +42,13 @@ class QuadraticISS:
         ``gamma_i(s) = k[i] s^2``, one per node.
     lambda_min_P, lambda_max_P : float
         Extreme eigenvalues of ``P`` (``lambda_min_P |xi|^2 <= V <= lambda_max_P |xi|^2``).
+    P : ndarray, shape (n_x, n_x), optional
+        The Lyapunov matrix the gains rest on (``None`` for gains given by hand); its
+        extreme eigenvalues must be ``lambda_min_P`` and ``lambda_max_P``.
+    P_origin : str
+        How ``P`` was found (:attr:`~etobs.design.ObserverGain.origin`).
+    c_v, c : float and tuple of float, optional
+        The split constants of :func:`quadratic_iss_gains` (``nan`` and ``()`` when not known).
 
     """
 
@@ -49,6 +57,10 @@ class QuadraticISS:
     k: tuple[float, ...]
     lambda_min_P: float
     lambda_max_P: float
+    P: np.ndarray | None = field(default=None, compare=False)
+    P_origin: str = ""
+    c_v: float = math.nan
+    c: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         v.real("a", self.a, lower=0.0, lower_open=True)
@@ -57,6 +69,13 @@ class QuadraticISS:
             v.real(f"k[{i}]", ki, lower=0.0, lower_open=True)
         v.real("lambda_min_P", self.lambda_min_P, lower=0.0, lower_open=True)
         v.real("lambda_max_P", self.lambda_max_P, lower=self.lambda_min_P)
+        if self.P is not None:  # the error bound divides by lambda_min_P: it must be P's
+            eig = np.linalg.eigvalsh(v.matrix("P", self.P, (None, None)))
+            if not np.allclose(eig[[0, -1]], [self.lambda_min_P, self.lambda_max_P], rtol=1e-9, atol=0.0):
+                raise InputError(
+                    f"`P` has extreme eigenvalues ({eig[0]:.6g}, {eig[-1]:.6g}); got lambda_min_P = "
+                    f"{self.lambda_min_P:.6g}, lambda_max_P = {self.lambda_max_P:.6g}"
+                )
 
     @property
     def n_nodes(self) -> int:
@@ -71,7 +90,7 @@ def quadratic_iss_gains(
     c_v: float,
     c: Sequence[float],
 ) -> QuadraticISS:
-    """The ISS gains of Assumption 1 from ``P``, ``L``, ``Q`` and the split constants.
+    """The ISS gains of Assumption 2 from ``P``, ``L``, ``Q`` and the split constants.
 
     Parameters
     ----------
@@ -148,6 +167,10 @@ def quadratic_iss_gains(
         ),
         lambda_min_P=float(eig_P.min()),
         lambda_max_P=float(eig_P.max()),
+        P=gain.P,
+        P_origin=gain.origin,
+        c_v=float(c_v),
+        c=tuple(cs),
     )
 
 

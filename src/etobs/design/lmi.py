@@ -1,4 +1,4 @@
-"""Observer gains from linear matrix inequalities (section 7; cvxpy, optional extra ``design``).
+"""Observer gains from linear matrix inequalities (section 8; cvxpy, optional extra ``design``).
 
 The plant ``x' = A x + B u + G phi(H x)`` has a nonlinearity whose slope lies in a known
 interval (a sector/slope bound). Along the estimation error ``xi = x - xhat`` of the
@@ -6,7 +6,7 @@ Luenberger observer ``xhat' = A xhat + B u + G phi(H xhat) + L (y - C xhat)``, t
 nonlinearity contributes ``G s(t) H xi`` with ``s(t)`` in the slope interval, so the error
 matrix lies in the polytope with vertices ``A + G s_k H - L C``. A common quadratic
 Lyapunov function ``V(xi) = xi' P xi`` for all vertices is found from the LMIs (the
-paper's section 7, after Zemouche & Boutayeb 2008)::
+paper's section 8, after Zemouche & Boutayeb 2008)::
 
     P (A + A_k) - W C + (P (A + A_k) - W C)' <= -Q   at every vertex A_k,   P > 0,
 
@@ -50,9 +50,13 @@ class ObserverGain:
     abscissa : ndarray, shape (K,)
         Largest real part of the eigenvalues of each vertex matrix ``A + A_k - L C``.
     solver_status : str
-        What the SDP solver reported (``"given"`` when ``L`` was given and only ``P`` found).
+        What the SDP solver reported (``"given"`` when ``L`` was given and only ``P``
+        found, ``"P given"`` when both were given and only re-checked).
     margin : float
         Margin used for the strict inequalities in the solve.
+    origin : str
+        How ``P`` was found, in words (shown by certificates that rest on it: the
+        guarantees depend on ``P``, and ``L`` admits many).
 
     """
 
@@ -65,6 +69,7 @@ class ObserverGain:
     solver_status: str
     margin: float
     notes: tuple[str, ...] = field(default=())
+    origin: str = ""
 
     @property
     def ok(self) -> bool:
@@ -187,7 +192,7 @@ def observer_gain(
     while True:
         out = _design(cp, Am, Cm, verts, Qm, mu, objective, max_gain, solver)
         if out.ok:
-            return out
+            return replace(out, origin=f"designed together with L by observer_gain (objective {objective!r})")
         if mu * 10 > cap:
             break
         mu *= 10
@@ -239,46 +244,78 @@ def check_gain(
     L: Any,
     vertices: Sequence[Any] = (),
     *,
+    P: Any = None,
     Q: Any = None,
     margin: float = 1e-6,
     solver: str | None = None,
 ) -> ObserverGain:
-    """Whether a given ``L`` satisfies the LMIs for some ``P`` (e.g. the paper's printed gain).
+    """Whether a given ``L`` satisfies the LMIs, for a given ``P`` or for some ``P``.
 
-    Finds ``P`` with ``trace(P) = 1`` maximizing ``s`` such that every vertex has
-    ``P A_cl,k + A_cl,k' P <= -s I``; if ``s > 0``, ``P`` is scaled so that the inequalities
-    hold with ``Q`` (they are homogeneous in ``P``) and re-checked.
+    With ``P`` (e.g. the :attr:`ObserverGain.P` of a design) the LMIs are only
+    re-checked with eigenvalues at that ``P``; no solver runs. Without it, finds ``P``
+    with ``trace(P) = 1`` maximizing ``s`` such that every vertex has
+    ``P A_cl,k + A_cl,k' P <= -s I``; if ``s > 0``, ``P`` is scaled so that the
+    inequalities hold with ``Q`` (they are homogeneous in ``P``) and re-checked. That
+    ``P`` is one of many: the guarantees built on it (ISS gains, certificates) differ
+    from those built on the ``P`` designed together with ``L``, and either may be the
+    smaller, so pass the designed ``P`` to certify a design as designed.
+
+    Parameters
+    ----------
+    A, C, L, vertices
+        As in :func:`observer_gain`, with ``L`` of shape (n_x, n_y).
+    P : array_like, shape (n_x, n_x), optional
+        Lyapunov matrix to re-check, symmetric (up to 1e-9 relative; its symmetric part
+        is used).
+    Q, margin, solver
+        As in :func:`observer_gain`.
 
     Returns
     -------
     ObserverGain
-        ``ok`` tells whether ``L`` satisfies the LMIs; ``notes`` say why not.
+        ``ok`` tells whether ``L`` satisfies the LMIs; ``notes`` say why not, and
+        ``origin`` how ``P`` was found.
 
     """
-    cp = _cvxpy()
     Am, Cm, verts, Qm = _system(A, C, vertices, Q)
     Lm = v.matrix("L", L, (Am.shape[0], Cm.shape[0]))
     v.real("margin", margin, lower=0.0, lower_open=True)
     n = Am.shape[0]
-    P = cp.Variable((n, n), symmetric=True)
+    if P is not None:
+        Pm = v.matrix("P", P, (n, n))
+        if np.max(np.abs(Pm - Pm.T)) > 1e-9 * max(1.0, float(np.max(np.abs(Pm)))):
+            asym = float(np.max(np.abs(Pm - Pm.T)))
+            raise InputError(f"`P` must be symmetric; got P - P' with largest entry {asym:.3g}")
+        out = _recheck(Am, Cm, verts, Qm, Lm, _sym(Pm), "P given", margin)
+        out = replace(out, origin="given with L (re-checked with eigenvalues)")
+        worst = int(np.argmax(out.residuals))
+        if out.residuals[worst] >= 0:
+            out = _with_notes(
+                out,
+                f"the given P does not fit L and Q: P A_cl + A_cl' P + Q has the eigenvalue "
+                f"{out.residuals[worst]:.3g} at vertex {worst} (must be < 0)",
+            )
+        return out
+    cp = _cvxpy()
+    P_ = cp.Variable((n, n), symmetric=True)
     s = cp.Variable()
-    cons = [P >> 0, cp.trace(P) == 1]
+    cons = [P_ >> 0, cp.trace(P_) == 1]
     for Ak in verts:
         Acl = Am + Ak - Lm @ Cm
-        cons.append(P @ Acl + Acl.T @ P << -s * np.eye(n))
+        cons.append(P_ @ Acl + Acl.T @ P_ << -s * np.eye(n))
     status = _solve(cp.Problem(cp.Maximize(s), cons), solver)
-    if P.value is None or s.value is None:
+    if P_.value is None or s.value is None:
         raise DesignError(f"could not test the gain: the solver reported {status!r}")
     best = float(s.value)
     if best <= margin:
-        Pv = _sym(P.value)
+        Pv = _sym(P_.value)
         out = _recheck(Am, Cm, verts, Qm, Lm, Pv, status, margin)
         note = f"no common quadratic Lyapunov function: the best decrease is {best:.3g} (needs > 0)"
         return _with_notes(out, note)
     # The inequalities are homogeneous in P: with the decrease s_true measured by
     # eigenvalues at the solver's P, scaling P by (lambda_max(Q) + margin) / s_true makes
     # every vertex satisfy P A_cl + A_cl' P <= -(lambda_max(Q) + margin) I <= -Q - margin I.
-    Pv = _sym(P.value)
+    Pv = _sym(P_.value)
     s_true = -max(
         np.linalg.eigvalsh(_sym(Pv @ (Am + Ak - Lm @ Cm) + (Am + Ak - Lm @ Cm).T @ Pv)).max() for Ak in verts
     )
@@ -286,7 +323,12 @@ def check_gain(
         out = _recheck(Am, Cm, verts, Qm, Lm, Pv, status, margin)
         return _with_notes(out, f"the solver's P gives no decrease when re-checked (best {s_true:.3g})")
     Pv = Pv * (np.linalg.eigvalsh(Qm).max() + margin) / s_true
-    return _recheck(Am, Cm, verts, Qm, Lm, Pv, "given", margin)
+    out = _recheck(Am, Cm, verts, Qm, Lm, Pv, "given", margin)
+    return replace(
+        out,
+        origin="found by check_gain for the given L (the trace-1 P with the largest common decrease, "
+        "scaled to meet Q); another P, such as the one designed with L, gives other bounds",
+    )
 
 
 def _system(A: Any, C: Any, vertices: Sequence[Any], Q: Any) -> tuple[np.ndarray, ...]:
