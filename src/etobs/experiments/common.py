@@ -5,24 +5,8 @@ A sweep (``etobs sweep``) and a rule comparison (``etobs compare``) are both a s
 the same seeded initial states with the same horizon, metrics, solver settings and
 execution settings. These common tables are parsed here, by one function
 (:func:`parse_common`), so a key means the same and fails with the same message in
-every spec format:
-
-``name``
-    letters, digits, ``_`` or ``-``.
-``[system] factory``
-    a registered example or ``"package.module:function"``.
-``[initial_states]``
-    ``low``, ``high`` (lists of numbers), ``runs`` (>= 1), ``seed`` (>= 0).
-``[horizon] t_end``
-    > 0.
-``[metrics]``
-    ``transmissions_window``, ``error_window`` (pairs within ``[0, t_end]``, default the
-    whole horizon), ``error_grid_step`` (> 0, default 1e-3).
-``[solver]``
-    any :class:`~etobs.hybrid.options.SolverOptions` field.
-``[execution]``
-    ``chunk_size`` (runs solved together, default 20) and ``backend`` (``"auto"``,
-    ``"engine"`` or ``"scipy"``).
+every spec format. Every key, its type, default and limits are listed in
+``docs/specs.md`` ("Sweep and comparison: the shared tables").
 
 The pipeline (:mod:`etobs.experiments.pipeline`) runs the groups of any
 :class:`Experiment` through the same executors and chunk store.

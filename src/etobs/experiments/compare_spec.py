@@ -1,54 +1,10 @@
 """Specification of a rule comparison (``etobs compare SPEC``): data, validated, frozen.
 
-A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``)::
-
-    name = "robot_arm_rules"
-    [system]
-    factory = "robot_arm"          # the base problem: its nodes, plant, observer
-    params = { noise = true }      # keyword arguments of the factory
-    [initial_states]               # the same initial states for every entry
-    low = [0, 0, 0, 0]
-    high = [20, 10, 20, 10]
-    runs = 10
-    seed = 2023
-    [horizon]
-    t_end = 30.0
-    [metrics]                      # as in a sweep spec
-    error_window = [20.0, 30.0]
-    [solver]                       # any SolverOptions field
-    rtol = 1e-10
-    [execution]                    # as in a sweep spec
-    chunk_size = 20                # runs solved together
-    backend = "auto"               # the engine (the scipy reference for a rule of your own)
-
-    [[rules]]                      # one entry per rule; per-node values are a number
-    name = "dynamic (paper)"       # (every node) or a list (one per node)
-    kind = "base"                  # the factory's own rules
-    [[rules]]
-    name = "static"
-    kind = "static"                # gamma from the base rule, eps given (or the base's)
-    eps = 10.0
-    [[rules]]
-    name = "observer copy"
-    kind = "base"
-    observer_copy = true           # Remark 3: nodes hold ytilde - yhat
-
-    [[networks]]                   # every rule runs on every network (default: ideal)
-    name = "ideal"
-    [[networks]]
-    name = "20% loss, 10 ms"
-    delay = 0.01                   # or { uniform = [lo, hi] } or { exponential = [scale, min] }
-    loss = 0.2                     # or { gilbert_elliott = [p_gb, p_bg, loss_good, loss_bad] }
-    capacity = 16
-    seed = 1
-
-The tables shared with a sweep spec are parsed by
-:func:`etobs.experiments.common.parse_common`, which documents them.
-
-Rule kinds and their keys: ``base``; ``dynamic`` (any of ``sigma``, ``c``, ``b``,
-``eps``, ``eta0`` replacing the base :class:`~etobs.model.DynamicRule`'s);
-``static`` (``eps``); ``periodic`` (``period``); ``relative`` (``rho``, ``eps``);
-``send_on_delta`` (``delta``). Every kind takes ``observer_copy``.
+A spec is a TOML file (see ``experiments/data/robot_arm_compare.toml``): every key (the
+rules and their kinds, the networks), its type, default and limits, and a minimal and a
+full example are in ``docs/specs.md`` ("Comparison"), which a test keeps in step with
+this parser. The tables shared with a sweep spec are parsed by
+:func:`etobs.experiments.common.parse_common`.
 """
 
 from __future__ import annotations

@@ -1,37 +1,10 @@
 """Sweep specifications: a validated, frozen description of a Monte-Carlo sweep.
 
-A spec is data, usually a TOML file (see ``examples/table1.toml``)::
-
-    name = "table1"
-    [system]
-    factory = "robot_arm"          # a registered example or "package.module:function"
-    fixed = { c = [0.001, 0.001] } # keyword arguments given to every row
-    [[rows]]                       # one table per parameter row (or a [grid])
-    sigma = [600, 800]
-    [[scenarios]]                  # each row runs under every scenario
-    name = "with_v_m"
-    noise = true
-    [initial_states]               # uniform in a box, seeded
-    low = [0, 0, 0, 0]
-    high = [20, 10, 20, 10]
-    runs = 100
-    seed = 2023
-    [horizon]
-    t_end = 30.0
-    [metrics]
-    transmissions_window = [0.0, 30.0]
-    error_window = [20.0, 30.0]
-    error_grid_step = 0.001
-    [solver]                       # any SolverOptions field
-    rtol = 1e-10
-    [execution]
-    chunk_size = 100               # runs solved together
-    backend = "auto"               # or "engine", "scipy" (see etobs.simulate)
-
-Every key is checked: unknown keys are rejected and a wrong value names its key. The
-tables a sweep shares with a comparison (``system.factory``, ``initial_states``,
-``horizon``, ``metrics``, ``solver``, ``execution``) are parsed by
-:func:`etobs.experiments.common.parse_common`, which documents them.
+A spec is data, usually a TOML file (see ``examples/table1.toml``): every key, its type,
+default and limits, and a minimal and a full example are in ``docs/specs.md`` ("Sweep"),
+which a test keeps in step with this parser. Every key is checked: unknown keys are
+rejected and a wrong value names its key. The tables a sweep shares with a comparison
+are parsed by :func:`etobs.experiments.common.parse_common`.
 """
 
 from __future__ import annotations
@@ -54,7 +27,15 @@ from etobs.experiments.systems import build, check_arguments
 
 #: Columns of the result tables; a parameter may not take one of these names.
 RESERVED = ("row", "scenario", "run", "status", "transmissions", "error", "steps", "runs", "completed")
-_RESERVED_PREFIXES = ("transmissions_", "min_inter_event_time_", "x0_", "error_", "paper_")
+_RESERVED_PREFIXES = (
+    "transmissions_",
+    "min_inter_event_time_",
+    "x0_",
+    "error_",
+    "paper_",
+    "packets_",
+    "not_applied_",
+)
 
 
 def _check_names(rows: tuple[dict[str, Any], ...], scenarios: tuple[Any, ...], fixed: dict[str, Any]) -> None:

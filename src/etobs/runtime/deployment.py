@@ -1,31 +1,9 @@
 """A deployment spec: the problem, the sampling, the endpoints and the secret (validated, frozen).
 
-TOML (the packaged ``robot_arm`` is ``runtime/data/robot_arm_live.toml``)::
-
-    name = "robot_arm_live"
-    [system]
-    factory = "robot_arm"          # its plant, observer and nodes' rules
-    params = {}
-    [runtime]
-    period = 0.002                 # sensors' sampling period [s]
-    duration = 10.0                # plant time to run [s]
-    time_scale = 1.0               # > 1: faster than real time (demos, tests)
-    host = "127.0.0.1"
-    port = 47100                   # UDP, the observer's
-    http_port = 47101              # GET /estimate
-    http_host = "127.0.0.1"        # where GET /estimate listens (apart from the UDP host)
-    http_token_file = "etobs.http-token"  # its bearer token; required off loopback
-    dt = 0.001                     # observer integration step
-    hold_back = 0.05               # observer runs this far behind the clock [s]
-    secret_file = "etobs.secret"   # 32 random bytes; per-node keys derive from it (mode 600)
-    state_file = "etobs.state"     # the service's high-water marks (default: the secret's
-                                   # name with .state)
-    max_value = 1e12               # larger (or non-finite) values are refused
-    transport = "udp"              # or "mqtt" (extra `mqtt`), with:
-    broker = "127.0.0.1:1883"      # the MQTT broker
-    topic = "etobs/robot_arm_live" # nodes publish on <topic>/node/<i>
-    [plant]                        # the simulated plant the sensors read (demo, tests)
-    x0 = [3.0, 2.0, 3.0, -2.0]
+A TOML file (the packaged ``robot_arm`` is ``runtime/data/robot_arm_live.toml``): every
+key of ``[system]``, ``[runtime]`` and ``[plant]``, its type, default and limits, and a
+minimal and a full example are in ``docs/specs.md`` ("Deployment"), which a test keeps in
+step with :func:`parse_deployment`.
 """
 
 from __future__ import annotations
