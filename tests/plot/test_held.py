@@ -225,3 +225,15 @@ def test_inter_event_times_check_the_run(arcs_only):
     # it drew empty panels for a run that does not exist
     with pytest.raises(InputError, match=r"`run` must be in 0\.\.1; got 5"):
         plot_inter_event_times(arcs_only, run=5)
+
+
+def test_a_node_that_never_sent_holds_its_first_value():
+    result = simulate(two_sensors(), x0=X0[0], t_end=0.05, backend="scipy")
+    assert len(result.transmissions) == 0
+    arc = result.arc(0)
+    _, axes = plot_held_outputs(result)
+    for i, ax in enumerate(axes):
+        _, held, _ = _line(ax, rf"$\bar y_{{{i + 1}}}$")
+        np.testing.assert_array_equal(held, arc.x[0, i])  # ybar(0) = y(0), never updated
+        assert _ticks(ax).size == 0
+        assert "transmissions (0)" in [t.get_text() for t in ax.get_legend().get_texts()]
