@@ -53,6 +53,9 @@ _EXPORTS = {
     "TriggerRule": "etobs.model",
     "Zero": "etobs.model",
     "luenberger": "etobs.model",
+    "linear_luenberger": "etobs.model",
+    "linear_plant": "etobs.model",
+    "python_control_plant": "etobs.model",
     "factory": "etobs._spec",
 }
 
@@ -96,7 +99,10 @@ if TYPE_CHECKING:
         StaticRule,
         TriggerRule,
         Zero,
+        linear_luenberger,
+        linear_plant,
         luenberger,
+        python_control_plant,
     )
 
 
@@ -157,9 +163,12 @@ __all__ = [
     "factory",
     "input_transmission_counts",
     "inter_event_times",
+    "linear_luenberger",
+    "linear_plant",
     "luenberger",
     "max_estimation_error",
     "min_inter_event_time",
+    "python_control_plant",
     "simulate",
     "transmission_counts",
 ]

@@ -4,6 +4,7 @@ from etobs.model.functions import Custom, KFunction, Linear, Power, Quadratic
 from etobs.model.generalized import GeneralizedRule
 from etobs.model.high_gain import high_gain_gain, high_gain_observer
 from etobs.model.kalman import ekf_initial_state, extended_kalman_filter
+from etobs.model.linear import linear_luenberger, linear_plant
 from etobs.model.network import (
     BernoulliLoss,
     ConstantDelay,
@@ -16,6 +17,7 @@ from etobs.model.network import (
 from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer, luenberger
 from etobs.model.plant import Plant
+from etobs.model.python_control import python_control_plant
 from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
@@ -51,6 +53,9 @@ __all__ = [
     "extended_kalman_filter",
     "high_gain_gain",
     "high_gain_observer",
+    "linear_luenberger",
+    "linear_plant",
     "luenberger",
+    "python_control_plant",
     "send_on_delta",
 ]

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.errors import InputTypeError
 
 PlantFn = Callable[..., np.ndarray]
 OutputFn = Callable[..., np.ndarray]
@@ -56,8 +57,15 @@ class Plant:
     params: Any = None
 
     def __post_init__(self) -> None:
-        v.function("f_p", self.f_p)
-        v.function("h", self.h)
+        for name in ("f_p", "h"):
+            fn = getattr(self, name)
+            if type(fn).__module__.partition(".")[0] == "control":  # a system is callable too
+                raise InputTypeError(
+                    f"`{name}` is a python-control {type(fn).__name__}, not a function: build the plant "
+                    "with etobs.python_control_plant(sys, disturbances=...), or from matrices with "
+                    "etobs.linear_plant(A, B, C)"
+                )
+            v.function(name, fn)
         v.integer("n_x", self.n_x, lower=1)
         v.integer("n_y", self.n_y, lower=1)
         v.integer("n_u", self.n_u, lower=0)
