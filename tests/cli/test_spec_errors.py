@@ -157,3 +157,18 @@ def test_check_refuses_both_e_and_its_estimate(tmp_path, capsys):
     spec.write_text(writer() + "E = 1.0\nE_estimate = { low = [0.0, 0.0], high = [1.0, 1.0] }\n")
     line = one_clear_line(*run(["check", str(spec)], capsys))
     assert line.endswith("give either `guarantees.E` or `guarantees.E_estimate`, not both")
+
+
+def test_a_deployment_given_as_a_dictionary_is_checked_as_a_file_is(tmp_path):
+    # parse_deployment skipped etobs._spec.check_tree (parse_spec and the CLI did not): a
+    # date reached the factory as an argument
+    import datetime
+
+    from etobs.runtime.deployment import parse_deployment
+
+    raw = {
+        "system": {"factory": "robot_arm", "params": {"eps": datetime.date(2020, 1, 1)}},
+        "runtime": {"period": 0.1, "duration": 1.0},
+    }
+    with pytest.raises(SpecError, match=r"^`system.params.eps` must be a number, .*; got a date or time"):
+        parse_deployment(raw, tmp_path)

@@ -134,3 +134,49 @@ def test_generated_sweep_specs_are_valid_or_name_the_key(case):
 @given(changed(COMPARE))
 def test_generated_compare_specs_are_valid_or_name_the_key(case):
     valid_or_named(parse_compare_spec, *case)
+
+
+DEPLOY = {
+    "name": "fuzz",
+    "system": {"factory": "tests.estimation.linear:factory", "params": {"eps": 0.01}},
+    "runtime": {
+        "period": 0.01,
+        "duration": 1.0,
+        "time_scale": 2.0,
+        "host": "127.0.0.1",
+        "port": 0,
+        "http_port": 0,
+        "http_host": "127.0.0.1",
+        "dt": 0.001,
+        "hold_back": 0.05,
+        "secret_file": "secret.key",
+        "state_file": "marks.state",
+        "max_value": 1e6,
+        "transport": "mqtt",
+        "broker": "127.0.0.1:1883",
+        "topic": "etobs/fuzz",
+    },
+    "plant": {"x0": [1.0, 0.0]},
+}
+
+
+@settings(max_examples=150, deadline=None)
+@given(changed(DEPLOY))
+def test_generated_deployment_specs_are_valid_or_name_the_key(case):
+    # parse_deployment (and the factory it names) never raises anything but an InputError
+    # naming a changed key; it now also refuses what no key takes (check_tree) when the
+    # spec is given as a dictionary, as parse_spec does
+    from pathlib import Path
+
+    from etobs.runtime.deployment import parse_deployment
+
+    raw, names = case
+    try:
+        dep = parse_deployment(raw, Path("/nonexistent"))
+        dep.problem()
+    except InputError as exc:
+        message = str(exc)
+        assert re.search(r"`[^`]*`|'[^']*'", message), message
+        assert any(name in message for name in names), (names, message)
+    except EtobsError as exc:
+        raise AssertionError(f"not a SpecError naming the key: {exc!r}") from exc

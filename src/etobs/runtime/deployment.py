@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import FACTORY, TABLE, SpecError
+from etobs._spec import FACTORY, TABLE, SpecError, check_tree
 from etobs._spec import keys as _keys
 from etobs._spec import name as _name
 from etobs._spec import number as _number
@@ -138,6 +138,7 @@ class Deployment:
 
 def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
     """Validate a deployment spec (the parsed TOML); relative paths are taken from ``base``."""
+    check_tree(raw)
     top = _keys("spec", raw, {"system": TABLE, "runtime": TABLE}, {"name", "plant"})
     system = _keys("system", top["system"], {"factory": FACTORY}, {"params"})
     params = system.get("params", {})
