@@ -4,6 +4,8 @@ Hypothesis draws small hybrid systems; each family is ONE compiled system whose 
 travel in ``params`` (module-level, closure-free functions), so that the examples cost a
 solve each, not a compilation. Two independent integrators and event locators agree on
 the rules that jump, their order and their number, and on the jump times to 1e-7 s.
+They also agree on the state entries each system logs after every jump
+(``log_columns``, ``JumpLog.x``), to the same tolerance as the final states.
 The draws keep every crossing transversal and every two events of different rules
 apart by more than 1e-6 s: simultaneous events (where the scipy reference may report
 the second rule a rounding error later) are tested on their own in test_solver.py.
@@ -31,6 +33,8 @@ def _agree(system, x0, t_end):
     assert eng.jumps.rule.tolist() == sci.jumps.rule.tolist()
     np.testing.assert_allclose(eng.jumps.t, sci.jumps.t, rtol=0, atol=TIME_TOL)
     np.testing.assert_allclose(eng.x_final, sci.x_final, rtol=0, atol=1e-6)
+    assert eng.jumps.names == sci.jumps.names and eng.jumps.x.shape[1] == len(system.log_columns) > 0
+    np.testing.assert_allclose(eng.jumps.x, sci.jumps.x, rtol=0, atol=1e-6)
     return eng.jumps
 
 
@@ -80,10 +84,13 @@ def test_clocks_jump_alike_on_engine_and_scipy(clocks):
         guard=_clock_levels,
         jump=_clock_reset,
         params=np.r_[rates, levels],
+        log_columns=tuple(range(N_CLOCKS)),
     )
     log = _agree(system, x0, CLOCK_HORIZON)
     assert log.rule.tolist() == [i for _, i in expected]
     np.testing.assert_allclose(log.t, times[:-1], rtol=0, atol=TIME_TOL)
+    # after its jump the clock that fired is at 0; the others at rate * time since their reset
+    assert np.all(log.x[np.arange(len(log)), log.rule] == 0.0)
 
 
 # ---- an overdamped oscillator pulled above a level, reset below it when it gets there --
@@ -127,6 +134,8 @@ def test_oscillator_jumps_alike_on_engine_and_scipy(omega, zeta, level, d, r, be
         guard=_reaches_level,
         jump=_reset_below,
         params=[omega, zeta, 1.0, level, d, r],
+        log_columns=(0, 1),
     )
     log = _agree(system, [level - below, v0], OSCILLATOR_HORIZON)
     assert set(log.rule.tolist()) <= {0}
+    np.testing.assert_array_equal(log.x[:, 0], level - d)  # the reset position, exactly
