@@ -274,3 +274,15 @@ def test_python_numba_cannot_compile_is_a_clear_engine_error_and_runs_on_the_ref
         simulate(pb, X0[0], 1.0)
     res = simulate(pb, X0[0], 1.0, backend="scipy")
     assert res.status_labels() == ["completed"] and len(res.transmissions) > 0
+
+
+def test_the_models_page_runs_as_written(capsys):
+    from pathlib import Path
+
+    from tests.docs_blocks import run_python_blocks
+
+    ns = run_python_blocks(Path(__file__).parents[2] / "docs" / "models.md")
+    out = capsys.readouterr().out
+    assert "engine" in out and "completed" in out
+    # the page's claim: the StateSpace and the matrices give the same transmissions
+    np.testing.assert_array_equal(ns["from_control"].transmissions.x, ns["from_matrices"].transmissions.x)
