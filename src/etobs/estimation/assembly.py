@@ -2,7 +2,7 @@
 
 A *channel* is what one node sends: the output node ``i`` sends ``ytilde_i`` (or, in
 the observer-copy variant of Remark 3, the output estimation error
-``ytilde_i - yhat_i``), an input node sends ``u_k`` (section 6.3). Every channel has
+``ytilde_i - yhat_i``), an input node sends ``u_k`` (section 7.3). Every channel has
 
 * a *sent* value: the value the node last sent; its rule acts on
   ``e = sent - (current value)``;
@@ -141,7 +141,7 @@ class _Assembly:
                 e = q[:, ch.sent] - sig
                 out[:, ch.rule_state] = self._derivative(
                     ch, t, e, q[:, ch.rule_state], meas
-                )  # eq. (14), (52)
+                )  # eq. (14), (53)
         return out
 
     def guard(self, t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -151,7 +151,7 @@ class _Assembly:
         g = np.empty((q.shape[0], n_ch + off))
         for c, ch in enumerate(self.channels):
             sig, meas = self._source(ch, yt, u, yhat)
-            g[:, off + c] = self._trigger(ch, t, q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # (15), (53)
+            g[:, off + c] = self._trigger(ch, t, q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # (15), (54)
             if self.networked:  # a packet's arrival time has come
                 assert ch.net is not None and ch.link is not None
                 for r in range(q.shape[0]):
@@ -202,4 +202,5 @@ class _Assembly:
             jump=jump,
             rule_names=names,
             n_flow=self.lay.n_flow,
+            log_columns=self.lay.sent_columns,  # the values sent, for the transmissions table
         )

@@ -96,6 +96,7 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
         n_flow=lay.n_flow,
         rule_names=names,
         function_names=ms.FUNCTIONS,
+        log_columns=lay.sent_columns,  # the values sent, for the transmissions table
         keep=fns,
     )
     return CompiledProblem(system=system, params=params)

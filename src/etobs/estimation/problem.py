@@ -2,7 +2,7 @@
 
 The hybrid state is ``q = (x, z, ybar, ubar, s_0, ..., s_{C-1}, [network], [run])``
 where ``s_c`` is the internal state of node ``c``'s rule (``eta`` for the dynamic rule),
-``ubar`` the held inputs of the input nodes (section 6.3, empty without them), and the
+``ubar`` the held inputs of the input nodes (section 7.3, empty without them), and the
 network part (only with a :class:`~etobs.model.network.Network`) the values the nodes
 last sent, their packets in flight and counters, and the run's index. We carry the held
 value ``ybar`` rather than the paper's ``e``: ``e_i = ybar_i - ytilde_i(t)`` is then
@@ -48,6 +48,21 @@ class StateLayout:
     n: int
     n_flow: int | None = None  # entries from here on are constant along flows (the network's)
 
+    @property
+    def sent_columns(self) -> tuple[int, ...]:
+        """Entries of ``q`` holding what each node last sent, node after node, in index order.
+
+        The solvers log them after every jump (``log_columns``): after a node's
+        transmission they hold the value it sent (eq. (22)), which the transmissions table
+        of :meth:`EstimationResult.to_pandas` reads.
+        """
+        return tuple(int(c) for ch in self.channels for c in ch.sent)
+
+    @property
+    def sent_names(self) -> tuple[str, ...]:
+        """Names of :attr:`sent_columns`: ``sent_y<k>`` for output ``k``, ``sent_u<k>`` for input ``k``."""
+        return tuple(f"sent_{ch.kind}{int(k)}" for ch in self.channels for k in ch.index)
+
 
 @dataclass(frozen=True)
 class EstimationProblem:
@@ -66,7 +81,7 @@ class EstimationProblem:
     m : Signal, callable, array_like or None
         Measurement noise ``m(t)`` (dimension ``n_y``), eq. (46): ``ytilde = h(x) + m``.
     input_nodes : sequence of InputNode, optional
-        Section 6.3: nodes that send components of ``u`` to the observer by their own
+        Section 7.3: nodes that send components of ``u`` to the observer by their own
         rules; the observer runs on the held ``ubar`` for those components. Their sets
         must be disjoint.
     hold : {"output", "innovation"}
@@ -401,7 +416,7 @@ def _check_shapes(pb: EstimationProblem) -> None:
 
 
 def _check_noise(pb: EstimationProblem) -> None:
-    """Warn when a node's ``eps_i <= gamma_i(2 m_i)`` (section 6.2) for sinusoidal noise.
+    """Warn when a node's ``eps_i <= gamma_i(2 m_i)`` (section 7.2) for sinusoidal noise.
 
     The rule sees ``e~_i = e_i + m_i(t_k) - m_i(t)``; a sinusoid's offset cancels there,
     so ``m_i`` is the norm of the node's amplitudes. Without the condition the noise
@@ -418,7 +433,7 @@ def _check_noise(pb: EstimationProblem) -> None:
         if bound > 0 and eps <= g2m:
             warnings.warn(
                 f"node {i} ({nd.name!r}): eps = {eps:g} <= gamma(2 m) = {g2m:.6g} with noise bound "
-                f"m = {bound:g}: section 6.2's condition fails, so noise alone can trigger transmissions; "
+                f"m = {bound:g}: section 7.2's condition fails, so noise alone can trigger transmissions; "
                 "raise eps",
                 RuntimeWarning,
                 stacklevel=4,  # the user's EstimationProblem(...), through __init__ and __post_init__

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.solution import HybridSolution, JumpLog
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import xarray as xr
 
 
 @dataclass(frozen=True)
@@ -24,7 +29,7 @@ class Trajectory:
         Hybrid times.
     x, z, xhat, ybar, e : ndarray
         Plant state, observer state, estimate ``psi(z)``, held outputs as the observer
-        holds them, and network-induced error ``e = ybar - ytilde`` (eq. (46)). In the
+        holds them, and network-induced error ``e = ybar - ytilde`` (eq. (49)). In the
         observer-copy variant (``hold="innovation"``) ``ybar`` holds
         ``ytilde - yhat`` as sent and ``e = ybar - (ytilde - yhat)``.
     eta : ndarray
@@ -46,6 +51,16 @@ class Trajectory:
     def error(self) -> np.ndarray:
         """Estimation error norm ``|x - xhat|``."""
         return np.linalg.norm(self.x - self.xhat, axis=-1)
+
+    def __repr__(self) -> str:
+        from etobs.estimation.tables import trajectory_repr
+
+        return trajectory_repr(self)
+
+    def _repr_html_(self) -> str:
+        from etobs.estimation.tables import trajectory_html
+
+        return trajectory_html(self)
 
 
 @dataclass(frozen=True)
@@ -85,14 +100,17 @@ class EstimationResult:
         """Every transmission: ``(run, rule=node, t, j)`` rows sorted by run then ``j``.
 
         ``rule`` is the node: ``0 .. N-1`` the output nodes, then the input nodes
-        (section 6.3). With a network this counts packets *sent*, received or not.
+        (section 7.3). With a network this counts packets *sent*, received or not.
+        ``x`` holds, just after each jump, what every node has last sent (columns
+        ``names``: ``sent_y<k>``, ``sent_u<k>``, node after node); the row's own node's
+        columns are the value it sent, which ``to_pandas("transmissions")`` tabulates.
         """
-        log = self.solution.jumps
+        log = self._named_log()
         if self.problem.network is None:
             return log
         C = self.problem.n_channels  # with a network, rules 0..C-1 are the deliveries
         keep = log.rule >= C
-        return JumpLog(log.run[keep], log.rule[keep] - C, log.t[keep], log.j[keep])
+        return replace(log[keep], rule=log.rule[keep] - C)
 
     @property
     def deliveries(self) -> JumpLog:
@@ -102,9 +120,14 @@ class EstimationResult:
         transmission's jump and has no row here; a stale packet (older than the last
         one applied) has a row but was not applied (see :meth:`network_stats`).
         """
+        log = self._named_log()
+        return log[(log.rule < self.problem.n_channels) & (self.problem.network is not None)]
+
+    def _named_log(self) -> JumpLog:
+        """The solver's jump log, its logged columns named as what they hold (the values sent)."""
         log = self.solution.jumps
-        keep = (log.rule < self.problem.n_channels) & (self.problem.network is not None)
-        return JumpLog(log.run[keep], log.rule[keep], log.t[keep], log.j[keep])
+        names = self.problem.layout.sent_names
+        return replace(log, names=names) if log.names != names else log
 
     def network_stats(self) -> dict[str, np.ndarray]:
         """Fate of every node's packets over the whole run, arrays of shape ``(B, C)``.
@@ -135,6 +158,108 @@ class EstimationResult:
             out["applied"][:, c] = q[:, meta + N_APPLIED]
             out["in_flight"][:, c] = np.sum(q[:, slot_columns(ch)[0]] < EMPTY, axis=1)
         return {"sent": sent, **out}
+
+    def __repr__(self) -> str:
+        from etobs.estimation.tables import result_repr
+
+        return result_repr(self)
+
+    def _repr_html_(self) -> str:
+        from etobs.estimation.tables import result_html
+
+        return result_html(self)
+
+    def to_pandas(self, table: str = "summary", *, window: Any = None, variables: Any = None) -> pd.DataFrame:
+        """The result as a pandas table: ``"summary"``, ``"transmissions"`` or ``"grid"``.
+
+        Nodes are numbered from 0 (node 0 is the paper's sensor 1): ``0 .. N-1`` the
+        output nodes, then the input nodes of section 7.3. Each frame's ``attrs`` holds
+        the window, the node names and what the columns rest on.
+
+        Parameters
+        ----------
+        table : {"summary", "transmissions", "grid"}
+            ``"summary"`` (default): one row per run. Columns ``run``, ``status``
+            (categorical: ``completed``, ``zeno``, ...), ``message`` (how it ended, and
+            the fix), ``backend``, ``t_final``, ``j_final``, ``n_steps``;
+            ``transmissions_<i>`` (node ``i``'s transmissions in ``window``, as
+            :func:`~etobs.estimation.transmission_counts` with ``nodes="all"``);
+            ``min_inter_event_time_<i>`` (over the whole run, NaN below two
+            transmissions, as :func:`~etobs.estimation.min_inter_event_time`); with a
+            network ``lost_<i>``, ``overflow_<i>``, ``stale_<i>``, ``in_flight_<i>``,
+            ``applied_<i>`` (as :meth:`network_stats`); ``final_error``
+            (``|x - xhat|`` where the run stopped); and, when a grid was kept,
+            ``max_error`` (``max |x - xhat|`` over the grid points in ``window``, as
+            :func:`~etobs.estimation.max_estimation_error`; ``attrs["max_error_grid"]``
+            names the grid). Without a grid there is no ``max_error`` column.
+
+            ``"transmissions"``: one row per transmission in ``window`` (with a network,
+            per packet sent, received or not), sorted by run then ``j``. Columns ``run``,
+            ``node``, ``node_name``, ``kind`` (``output`` or ``input``), ``t``, ``j``
+            (the jump goes from ``(t, j)`` to ``(t, j + 1)``), then the value sent:
+            ``sent_y<k>`` for output ``k`` (``ytilde_k(t)``, eq. (5); with
+            ``hold="innovation"`` what was sent, ``ytilde_k - yhat_k``, Remark 3) and
+            ``sent_u<k>`` for input ``k`` of an input node (``u_k(t)``); NaN in the
+            columns of other nodes' components. The row count per run and node equals
+            :func:`~etobs.estimation.transmission_counts`.
+
+            ``"grid"``: the saved grid in long form, one row per run, grid point,
+            variable and component: columns ``run``, ``t``, ``j``, ``variable``
+            (categorical: ``x``, ``z``, ``xhat``, ``ybar``, ``e``, ``eta``, ``error``),
+            ``component`` (index into the variable; for ``eta`` the node; 0 for
+            ``error = |x - xhat|``), ``value``. Long rather than one column per
+            component: the variables have different sizes, and a long frame filters,
+            groups and plots (``seaborn``, ``df.pivot``) without knowing them. Points
+            after a run stopped hold NaN with ``j = -1``. :meth:`to_xarray` holds the
+            same values as arrays.
+        window : (float, float), optional
+            Closed time window: the rows of ``"transmissions"`` and ``"grid"``, the
+            counts and ``max_error`` of ``"summary"`` (default: the whole horizon).
+        variables : str or sequence of str, optional
+            The grid table's variables (default: all).
+
+        Returns
+        -------
+        pandas.DataFrame
+
+        Raises
+        ------
+        InputError
+            For an unknown table or variable, or a grid table from a result that kept
+            no grid.
+
+        Examples
+        --------
+        >>> from etobs.examples import robot_arm
+        >>> res = simulate(robot_arm(), [3, 2, 3, -2], 1.0)  # doctest: +SKIP
+        >>> res.to_pandas("transmissions").groupby("node").size()  # doctest: +SKIP
+
+        """
+        from etobs.estimation.tables import to_pandas
+
+        return to_pandas(self, table, window, variables)
+
+    def to_xarray(self) -> xr.Dataset:
+        """The grid values as an ``xarray.Dataset`` (needs ``SaveAt(grid=...)``).
+
+        Variables ``x``, ``xhat`` (dims ``run, time, state``), ``z`` (``run, time,
+        observer_state``), ``ybar``, ``e`` (``run, time, output``), ``eta`` (``run, time,
+        node``: output nodes, then input nodes; node 0 is the paper's sensor 1),
+        ``error = |x - xhat|`` and ``j`` (``run, time``). Coordinates: ``run``, ``time``
+        (the save grid), the component indices, ``node_name`` and ``node_kind`` on
+        ``node``, ``status`` and ``message`` on ``run``. Attributes: ``backend``,
+        ``backend_reason``, ``t_span``, ``hold``; etobs attaches no units. Points after a
+        run stopped hold NaN with ``j = -1``.
+
+        Raises
+        ------
+        InputError
+            When the result kept no grid, or only ``max |x - xhat|`` over it.
+
+        """
+        from etobs.estimation.tables import to_xarray
+
+        return to_xarray(self)
 
     def status_labels(self) -> list[str]:
         """Status of each run (``"completed"``, ``"max_jumps"``, ...)."""

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs._progress import progress_bar
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
@@ -29,6 +30,7 @@ def simulate(
     save: SaveAt | None = None,
     backend: str = "auto",
     run_ids: Any = None,
+    progress: bool | None = None,
 ) -> EstimationResult:
     """Simulate the event-triggered observer (eq. (16)--(22)) from one or many initial states.
 
@@ -65,6 +67,10 @@ def simulate(
         With a network: the index of each run in its random streams (default
         ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
         not depend on how the sweep was chunked.
+    progress : bool or None
+        A progress bar on stderr counting the runs done: ``None`` (default) shows it when
+        stderr is a terminal and the batch takes more than a second; ``True`` or
+        ``False`` force it on or off.
 
     Returns
     -------
@@ -95,16 +101,24 @@ def simulate(
         ids = np.asarray(run_ids)
         if ids.shape != (B,) or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
             raise InputError(f"`run_ids` must be {B} non-negative integers (one per run); got {run_ids!r}")
+    if progress is not None and not isinstance(progress, bool):
+        raise InputError(
+            "`progress` must be None (a bar when stderr is a terminal), True or False; "
+            f"got {type(progress).__name__} {progress!r}"
+        )
     q0 = problem.initial_state(X0, Z0, E0, t0, ids)
     solver_save, after, notes = _estimation_error_save(problem, save)
     if backend == "engine":
         from etobs.estimation.compiled import compile_problem
         from etobs.hybrid.compiled import solve_compiled
 
-        cp = compile_problem(problem)
-        sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, options=options, save=solver_save)
-    else:
-        sol = solve_reference(problem.hybrid_system(), q0, (t0, t_end), options=options, save=solver_save)
+        cp = compile_problem(problem)  # before the bar: it counts runs solved, not the compile
+    with progress_bar(B, "simulate", enabled=progress) as bar:
+        kw = {"options": options, "save": solver_save, "progress": bar.update}
+        if backend == "engine":
+            sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, **kw)
+        else:
+            sol = solve_reference(problem.hybrid_system(), q0, (t0, t_end), **kw)
     res = EstimationResult(problem=problem, solution=sol, backend_reason=reason, notes=notes)
     if after:  # the error needs psi, which the solver does not know: reduce the kept grid
         from etobs.estimation.metrics import max_estimation_error
