@@ -15,7 +15,9 @@ from typing import Any
 DELAY = 1.0
 
 
-def progress_bar(total: int, desc: str, *, enabled: bool | None = None, unit: str = "run") -> Any:
+def progress_bar(
+    total: int, desc: str, *, enabled: bool | None = None, unit: str = "run", initial: int = 0
+) -> Any:
     """A tqdm bar on stderr counting ``total`` units of work.
 
     Parameters
@@ -28,6 +30,9 @@ def progress_bar(total: int, desc: str, *, enabled: bool | None = None, unit: st
         ``None``: shown when stderr is a terminal; ``True``/``False``: forced.
     unit : str
         Name of one unit.
+    initial : int
+        Units already done before this call (resumed work): counted in the bar, not in
+        its rate.
 
     Returns
     -------
@@ -55,4 +60,5 @@ def progress_bar(total: int, desc: str, *, enabled: bool | None = None, unit: st
         delay=0.0 if enabled else DELAY,
         dynamic_ncols=True,
         leave=True,
+        initial=initial,
     )

@@ -1,6 +1,7 @@
 """``etobs compare``: the spec, the table, persistence and resume, the plot."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -121,6 +122,30 @@ def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
     assert "[4/4] periodic / lossy: 2/2 runs completed" in printed.err
     for name in ("comparison.md", "comparison.json", "tradeoff.png", "spec.json"):
         assert (out / name).is_file()
+    import pandas as pd
+
+    for name in ("runs", "aggregate"):  # tidy tables, each CSV with its typed Parquet twin
+        csv, parquet = pd.read_csv(out / f"{name}.csv"), pd.read_parquet(out / f"{name}.parquet")
+        pd.testing.assert_frame_equal(parquet, csv, check_dtype=True)
+    runs, agg = pd.read_parquet(out / "runs.parquet"), pd.read_parquet(out / "aggregate.parquet")
+    assert list(runs.columns[:4]) == ["rule", "network", "run", "status"]
+    assert len(runs) == 8 and runs.transmissions_node0.dtype == "int64"
+    lossy = runs[runs.network == "lossy"]
+    assert (lossy.packets_node0 >= lossy.not_applied_node0).all() and lossy.not_applied_node0.sum() > 0
+    assert runs[runs.network == "ideal"].packets_node0.isna().all()
+    assert list(zip(agg.rule, agg.network, agg.completed, strict=True)) == [
+        ("dynamic", "ideal", 2),
+        ("periodic", "ideal", 2),
+        ("dynamic", "lossy", 2),
+        ("periodic", "lossy", 2),
+    ]
+    table = {
+        (r["rule"], r["network"]): r for r in json.loads((out / "comparison.json").read_text())["entries"]
+    }
+    for a in agg.itertuples():  # the same numbers as the JSON's entries
+        assert a.transmissions_node0_mean == np.mean(
+            np.array(table[(a.rule, a.network)]["transmissions"])[:, 0]
+        )
     data = json.loads((out / "comparison.json").read_text())
     assert [e["rule"] for e in data["entries"]] == ["dynamic", "periodic", "dynamic", "periodic"]
     assert [e["runs"] for e in data["entries"]] == [[0, 1]] * 4
@@ -142,6 +167,19 @@ def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):
     # more runs reuse the first ones
     assert main(["compare", str(spec), "--out", str(out), "--runs", "3", "--no-plot", *serial]) == 0
     assert "reused 8 of 12 runs" in capsys.readouterr().err
+
+
+def test_cli_progress_bar_counts_runs_and_keeps_the_entry_lines_whole(tmp_path, capsys):
+    spec = tmp_path / "cmp.toml"
+    spec.write_text(TOML)
+    assert (
+        main(["compare", str(spec), "--out", str(tmp_path / "out"), "--executor", "serial", "--progress"])
+        == 0
+    )
+    err = capsys.readouterr().err
+    assert "oscillator: 100%" in err and "8/8" in err and "0 failed" in err
+    # each entry's line is written through tqdm: the bar is cleared (\r), the line written whole
+    assert re.search(r"\r\[4/4\] periodic / lossy: 2/2 runs completed in [0-9.]+ s \(engine\)\n", err)
 
 
 def test_process_pool_and_dask_give_the_same_table(tmp_path, dask_cluster):

@@ -42,6 +42,19 @@ def test_sweep_command(tmp_path, capsys):
     assert "4 of 4 runs present (1 computed now, 3 reused)" in capsys.readouterr().out
 
 
+def test_progress_flag_forces_the_bar_on_or_off(tmp_path, capsys):
+    spec = write_spec(tmp_path / "s.toml", extra="[[rows]]\nk = 2.0\nfail = true\n")
+    argv = ["sweep", str(spec), "--executor", "serial", "--chunk-size", "1"]
+    assert main([*argv, "--out", str(tmp_path / "on"), "--progress"]) == 1
+    err = capsys.readouterr().err
+    assert "cli: 100%" in err and "6/6" in err and "3 failed" in err  # tqdm's bar, failed runs in it
+    assert "ETA" not in err and "nan" not in err  # not the hand-written line
+    assert main([*argv, "--out", str(tmp_path / "off"), "--no-progress"]) == 1
+    assert "%|" not in capsys.readouterr().err
+    assert main([*argv, "--out", str(tmp_path / "default")]) == 1  # captured stderr: not a terminal
+    assert "%|" not in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("flag", "resolved"), [("numba", "engine"), ("engine", "engine"), ("scipy", "scipy")]
 )
@@ -145,6 +158,12 @@ def test_reproduce_table1_command(tmp_path, capsys):
         "transmissions_std,error_mean,error_std,paper_transmissions,paper_error,runs"
     )
     assert len((tmp_path / "table1.csv").read_text().splitlines()) == 27
+    import pandas as pd
+
+    for name in ("table1", "runs", "aggregate"):  # each CSV has its typed Parquet twin
+        csv, parquet = pd.read_csv(tmp_path / f"{name}.csv"), pd.read_parquet(tmp_path / f"{name}.parquet")
+        pd.testing.assert_frame_equal(parquet, csv, check_dtype=True)
+    assert "transmissions_node1_mean" in pd.read_parquet(tmp_path / "aggregate.parquet")  # the arm's 2 nodes
     assert "# Table 1 of the paper, reproduced" in (tmp_path / "table1.md").read_text()
     resolved = json.loads((tmp_path / "spec.json").read_text())["resolved"]
     assert resolved["backend"] == "auto"  # simulate picks the engine for the robot arm

@@ -482,3 +482,100 @@ def test_a_malformed_dask_scheduler_address_is_an_input_error(tiny, tmp_path):
         InputError, match=r"`scheduler` \(--scheduler\) must be an address such as tcp://host:8786"
     ):
         run_sweep(tiny, tmp_path, executor="dask", scheduler="foo", progress=False)
+
+
+TWO_NODES = f"{Path(__file__).with_name('two_nodes.py')}:pair"
+
+
+def two_node_spec(**over):
+    raw = raw_spec(system={"factory": TWO_NODES}, rows=[{"eps1": 0.0005}, {"eps1": 0.01}], scenarios=[])
+    raw.pop("scenarios")
+    raw["initial_states"] = {"low": [-1.0, -1.0], "high": [1.0, 1.0], "runs": 4, "seed": 3}
+    raw.update(over)
+    return parse_spec(raw)
+
+
+def test_which_node_transmits_is_in_every_table(tmp_path):
+    import pandas as pd
+
+    res = run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    assert res.complete
+    runs = pd.read_csv(tmp_path / "runs.csv")
+    agg = pd.read_csv(tmp_path / "aggregate.csv")
+    assert (runs.transmissions == runs.transmissions_node0 + runs.transmissions_node1).all()
+    for node in ("node0", "node1"):
+        by_row = runs.groupby("row")
+        assert list(agg[f"transmissions_{node}_mean"]) == list(by_row[f"transmissions_{node}"].mean())
+        assert list(agg[f"transmissions_{node}_max"]) == list(by_row[f"transmissions_{node}"].max())
+        assert list(agg[f"min_inter_event_time_{node}_min"]) == list(
+            by_row[f"min_inter_event_time_{node}"].min()
+        )
+    # node 1 (the finer eps1) sends most: the aggregate says so, per node
+    assert (agg.transmissions_node1_mean > 5 * agg.transmissions_node0_mean).all()
+    assert "transmissions_node0_mean | transmissions_node1_mean" in (tmp_path / "report.md").read_text()
+
+
+def test_parquet_twins_hold_the_csv_tables_with_their_types(tmp_path):
+    import pandas as pd
+
+    res = run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    for name in ("runs", "aggregate"):
+        csv, parquet = pd.read_csv(tmp_path / f"{name}.csv"), pd.read_parquet(tmp_path / f"{name}.parquet")
+        pd.testing.assert_frame_equal(parquet, csv, check_dtype=True)
+    runs = pd.read_parquet(tmp_path / "runs.parquet")
+    kinds = runs.dtypes.map(lambda d: d.kind).to_dict()
+    assert {c: kinds[c] for c in ("row", "run", "transmissions_node1", "steps")} == dict.fromkeys(
+        ("row", "run", "transmissions_node1", "steps"), "i"
+    )
+    assert {c: kinds[c] for c in ("eps1", "error", "min_inter_event_time_node0", "x0_2")} == dict.fromkeys(
+        ("eps1", "error", "min_inter_event_time_node0", "x0_2"), "f"
+    )
+    assert pd.api.types.is_string_dtype(runs.status) and set(runs.status) == {"completed"}
+    assert pd.api.types.is_string_dtype(runs.scenario)
+    assert len(runs) == res.spec.n_runs
+
+
+def test_chunks_stored_earlier_give_the_per_node_columns_without_a_recomputation(tmp_path):
+    run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    before = {n: (tmp_path / n).read_bytes() for n in ("runs.csv", "aggregate.csv", "runs.parquet")}
+    for name in before:
+        (tmp_path / name).unlink()
+    again = run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    assert (again.computed, again.reused, again.other_chunks) == (0, 8, 0)
+    assert {n: (tmp_path / n).read_bytes() for n in before} == before
+
+
+def test_chunks_of_another_version_are_not_used_and_the_report_says_so(tmp_path, monkeypatch):
+    import etobs.experiments.common as common
+
+    run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    stored = len(list((tmp_path / "chunks").glob("*.json")))
+    monkeypatch.setattr(common, "RECORD_FORMAT", common.RECORD_FORMAT + 1)  # records of a new layout
+    res = run_sweep(two_node_spec(), tmp_path, executor="serial", progress=False)
+    assert (res.computed, res.reused, res.other_chunks) == (8, 0, stored)
+    assert (
+        f"{stored} chunk files in `chunks/` belong to another spec or etobs version"
+        in (tmp_path / "report.md").read_text()
+    )
+    assert json.loads((tmp_path / "meta.json").read_text())["other_chunks"] == stored
+
+
+def test_the_progress_bar_counts_runs_reused_runs_and_failed_runs(tmp_path, capsys):
+    spec = parse_spec(raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "fail": True}]))
+    run_sweep(spec, tmp_path, executor="serial", progress=True)
+    err = capsys.readouterr().err
+    assert "tiny: 100%" in err and "20/20" in err and "10 failed" in err
+    assert "nan" not in err and "unknown" not in err
+    # a rerun: the 10 stored runs count from the start, the failed chunks are tried again
+    run_sweep(spec, tmp_path, executor="serial", progress=True)
+    err = capsys.readouterr().err
+    assert "tiny:  50%" in err and "10/20" in err and "20/20" in err and "10 failed" in err
+    run_sweep(spec, tmp_path / "quiet", executor="serial", progress=False)
+    run_sweep(spec, tmp_path / "default", executor="serial")  # stderr is not a terminal here
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("name", ["packets_node0", "not_applied_node1", "transmissions_node0_mean"])
+def test_a_parameter_may_not_take_the_name_of_a_per_node_column(name):
+    with pytest.raises(SpecError, match=rf"parameter `rows\[0\].{name}` clashes with a result column"):
+        parse_spec(raw_spec(rows=[{name: 1.0}]))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -99,7 +98,7 @@ def execution_args(p: argparse.ArgumentParser) -> None:
         "--progress",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help="progress line on stderr (default: when stderr is a terminal)",
+        help="progress bar on stderr counting runs and failed runs (default: when stderr is a terminal)",
     )
 
 
@@ -114,12 +113,11 @@ def execution(spec: Any, args: argparse.Namespace) -> tuple[Any, dict[str, Any]]
     executor = args.executor or ("dask" if args.scheduler else "process")
     if args.scheduler and executor != "dask":
         raise InputError(f"--scheduler needs --executor dask; got --executor {executor}")
-    progress = sys.stderr.isatty() if args.progress is None else args.progress
     how = {
         "executor": executor,
         "workers": args.workers,
         "scheduler": args.scheduler,
         "chunk": args.chunk_size,
-        "progress": progress,
+        "progress": args.progress,  # None: etobs._progress decides (stderr a terminal)
     }
     return spec, how

@@ -2,9 +2,10 @@
 
 Runs through the same pipeline as ``etobs sweep`` (executors, chunk store, resume).
 Writes into ``--out``: ``comparison.md`` (the table), ``comparison.json`` (every run's
-figures), ``tradeoff.png`` (transmissions against error), ``spec.json`` and ``chunks/``
-(each chunk of runs as soon as it finishes; a rerun with the same spec and folder
-computes only what is missing).
+figures), ``runs.csv`` and ``aggregate.csv`` (tidy: one line per run, and statistics per
+entry; each with a typed ``.parquet`` twin), ``tradeoff.png`` (transmissions against
+error), ``spec.json`` and ``chunks/`` (each chunk of runs as soon as it finishes; a rerun
+with the same spec and folder computes only what is missing).
 """
 
 from __future__ import annotations
@@ -52,14 +53,16 @@ def run(args: argparse.Namespace) -> int:
     row = {(r.name, n.name): k + 1 for k, (r, n) in enumerate(spec.entries)}
 
     def report(e: EntryResult) -> None:  # [row of the table / rows]
+        from tqdm import tqdm
+
         ok = sum(s == "completed" for s in e.status)
         others = f" ({not_completed(e.status)})" if ok < len(e.status) else ""
-        print(
+        # through tqdm, so a progress bar on stderr is redrawn below the line, not cut
+        tqdm.write(
             f"[{row[(e.rule, e.network)]}/{spec.n_groups}] {e.rule} / {e.network}: "
             f"{ok}/{spec.initial_states.runs} runs completed{others} "
             f"in {e.seconds:.1f} s ({e.backend})",
             file=sys.stderr,
-            flush=True,
         )
 
     result = compare(spec, args.out, on_entry=report, **how)
@@ -68,9 +71,16 @@ def run(args: argparse.Namespace) -> int:
             f"reused {result.reused} of {spec.n_runs} runs finished earlier in {result.out}/chunks",
             file=sys.stderr,
         )
+    if result.other_chunks:
+        print(
+            f"{result.other_chunks} chunk files in {result.out}/chunks belong to another spec or etobs "
+            "version and were not used",
+            file=sys.stderr,
+        )
     _write(result, plot=not args.no_plot)
     print(result.markdown())
-    files = "comparison.md, comparison.json" + ("" if args.no_plot else ", tradeoff.png")
+    files = "comparison.md, comparison.json, runs.csv/.parquet, aggregate.csv/.parquet"
+    files += "" if args.no_plot else ", tradeoff.png"
     print(f"written to {result.out}/: {files}")
     return 0 if result.complete else 1
 

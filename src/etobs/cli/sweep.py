@@ -10,7 +10,7 @@ from typing import Any
 from etobs.cli._args import execution, execution_args, folder
 from etobs.experiments import SweepResult, load_spec, run_sweep
 from etobs.experiments.store import atomic_write, last_line
-from etobs.experiments.tables import to_csv
+from etobs.experiments.tables import write_table
 
 
 def add_parsers(sub: Any) -> None:
@@ -63,7 +63,7 @@ def run_table1_command(args: argparse.Namespace) -> int:
 
     result = _run(table1_spec(), args.out, args)
     lines = compare(result)
-    atomic_write(result.out / "table1.csv", to_csv([{k: ln[k] for k in COLUMNS} for ln in lines]))
+    write_table(result.out, "table1", [{k: ln[k] for k in COLUMNS} for ln in lines])
     text = markdown(lines, result)
     atomic_write(result.out / "table1.md", text)
     print(text)

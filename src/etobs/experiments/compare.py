@@ -23,9 +23,9 @@ import numpy as np
 
 from etobs.errors import InputError
 from etobs.experiments.compare_spec import CompareSpec
-from etobs.experiments.pipeline import experiment_folder, run_groups, stored
+from etobs.experiments.pipeline import experiment_folder, other_chunks, run_groups, stored
 from etobs.experiments.store import last_line
-from etobs.experiments.tables import not_completed, status_notes
+from etobs.experiments.tables import aggregate, not_completed, run_rows, status_notes, write_table
 
 
 @dataclass(frozen=True)
@@ -130,6 +130,16 @@ class Comparison:
         Chunks that failed (their error and ``where``); their runs are missing.
     computed, reused : int
         Runs computed by this call, and runs found already stored.
+    runs : tuple of dict
+        One line per stored run, as in ``runs.csv``: ``rule``, ``network``, ``run``,
+        ``status``, transmissions (total and per node), ``error``, per node the minimum
+        inter-event time (and with a network ``packets`` and ``not_applied``), ``x0_1``...,
+        ``steps`` (:func:`~etobs.experiments.tables.run_rows`).
+    aggregate : tuple of dict
+        One line per entry, as in ``aggregate.csv``: mean, std, min and max of each
+        metric over the completed runs (:func:`~etobs.experiments.tables.aggregate`).
+    other_chunks : int
+        Chunk files in ``out/chunks`` written for another spec or etobs version: not used.
 
     """
 
@@ -141,6 +151,9 @@ class Comparison:
     failures: tuple[dict[str, Any], ...] = ()
     computed: int = 0
     reused: int = 0
+    runs: tuple[dict[str, Any], ...] = ()
+    aggregate: tuple[dict[str, Any], ...] = ()
+    other_chunks: int = 0
 
     @property
     def complete(self) -> bool:
@@ -237,7 +250,7 @@ def compare(
     scheduler: str | None = None,
     client: Any = None,
     chunk: int | None = None,
-    progress: bool = False,
+    progress: bool | None = None,
     on_entry: Callable[[EntryResult], None] | None = None,
 ) -> Comparison:
     """Run (or resume) every rule of ``spec`` on every network, from the same initial states.
@@ -247,8 +260,10 @@ def compare(
     spec : CompareSpec
     out : path
         Output folder; runs already stored there for the same spec are not recomputed.
+        ``runs.csv`` and ``aggregate.csv`` (:attr:`Comparison.runs` and
+        :attr:`Comparison.aggregate`), each with a typed ``.parquet`` twin, are written there.
     executor, workers, scheduler, client, chunk, progress
-        As in :func:`~etobs.experiments.sweep.run_sweep` (``progress`` off by default).
+        As in :func:`~etobs.experiments.sweep.run_sweep`.
     on_entry : callable, optional
         Called as ``on_entry(result)`` when the last chunk this call computes for an entry
         has finished (stored or failed), e.g. to report it.
@@ -288,6 +303,13 @@ def compare(
             on_group=report,
         )
         got = stored(spec, store)
+        labels = [
+            {"rule": spec.entries[s.group][0].name, "network": spec.entries[s.group][1].name} for s in got
+        ]
+        runs = run_rows((lab, {}, list(s.records.values())) for lab, s in zip(labels, got, strict=True))
+        summary = aggregate(runs, (), [(lab, {}) for lab in labels])
+        write_table(store.out, "runs", runs)
+        write_table(store.out, "aggregate", summary)
         return Comparison(
             spec=spec,
             out=store.out,
@@ -297,4 +319,7 @@ def compare(
             failures=tuple(f for s in got for f in s.failures),
             computed=computed,
             reused=reused,
+            runs=tuple(runs),
+            aggregate=tuple(summary),
+            other_chunks=other_chunks(spec, store),
         )

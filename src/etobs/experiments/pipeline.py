@@ -18,10 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from etobs._progress import progress_bar
 from etobs.errors import InputError
 from etobs.experiments.common import Experiment, normalize
 from etobs.experiments.executors import check_execution, execute
-from etobs.experiments.progress import Progress
 from etobs.experiments.runner import Task
 from etobs.experiments.store import ResultStore, atomic_write, task_key
 
@@ -88,7 +88,7 @@ def run_groups(
     scheduler: str | None = None,
     client: Any = None,
     chunk: int | None = None,
-    progress: bool = True,
+    progress: bool | None = None,
     on_group: Callable[[int, dict[int, dict[str, Any]]], None] | None = None,
 ) -> tuple[int, int]:
     """Compute the runs of ``spec`` missing from ``store``; return how many were computed and reused.
@@ -102,9 +102,12 @@ def run_groups(
     pending: dict[int, int] = {}
     for t in tasks:
         pending[t.group] = pending.get(t.group, 0) + 1
-    bar = Progress(reused + sum(len(t.runs) for t in tasks), spec.name, enabled=progress)
-    bar.update(done=reused)
-    computed = 0
+    # one bar over every run of the spec: those stored earlier count from the start
+    # (not in the rate); a failed chunk's runs count as done and in the postfix
+    total = reused + sum(len(t.runs) for t in tasks)
+    bar = progress_bar(total, spec.name, enabled=progress, initial=reused)
+    bar.set_postfix_str("0 failed", refresh=False)
+    computed = failures = 0
 
     def finished(task: Task) -> None:
         pending[task.group] -= 1
@@ -115,12 +118,15 @@ def run_groups(
         nonlocal computed
         store.write(task.key, task.runs, records)
         computed += len(records)
-        bar.update(done=len(records))
+        bar.update(len(records))
         finished(task)
 
     def failed(task: Task, message: str) -> None:
+        nonlocal failures
         store.write_error(task.key, task.runs, message, spec.where(task.group))
-        bar.update(failed=len(task.runs))
+        failures += len(task.runs)
+        bar.set_postfix_str(f"{failures} failed", refresh=False)
+        bar.update(len(task.runs))
         finished(task)
 
     try:
@@ -138,6 +144,11 @@ def run_groups(
     finally:
         bar.close()
     return computed, reused
+
+
+def other_chunks(spec: Experiment, store: ResultStore) -> int:
+    """Chunk files in ``store`` that belong to no group of ``spec`` (:meth:`ResultStore.other_chunks`)."""
+    return store.other_chunks({task_key(spec, g) for g in range(spec.n_groups)})
 
 
 def stored(spec: Experiment, store: ResultStore) -> list[Stored]:

@@ -74,12 +74,12 @@ def last_line(failure: dict[str, Any]) -> str:
     return text.splitlines()[-1] if text else "unknown error"
 
 
-def atomic_write(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` so that readers see the old file or the whole new one."""
+def atomic_write(path: Path, text: str | bytes) -> None:
+    """Write ``text`` (or bytes) to ``path`` so that readers see the old file or the whole new one."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w") as fh:
+        with os.fdopen(fd, "wb" if isinstance(text, bytes) else "w") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
@@ -225,7 +225,19 @@ class ResultStore:
                 out.append(err)
         return out
 
+    def other_chunks(self, keys: set[str]) -> int:
+        """Chunk files stored under none of ``keys``: another spec's or another version's.
+
+        They are left in place (a changed spec may be changed back) but never read for
+        ``keys``; reports count them, so a recomputation is not silent.
+        """
+        return sum(
+            1
+            for path in self.chunks.glob("*__*.json")
+            if not path.name.endswith(".error.json") and path.name.partition("__")[0] not in keys
+        )
+
     def clean_temporary(self) -> None:
-        """Remove temporary files left by a writer that was killed mid-write."""
-        for path in self.chunks.glob(".*.tmp"):
+        """Remove temporary files left by a writer that was killed mid-write (chunks and tables)."""
+        for path in [*self.chunks.glob(".*.tmp"), *self.out.glob(".*.tmp")]:
             path.unlink(missing_ok=True)

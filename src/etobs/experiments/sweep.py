@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
-from etobs.experiments.pipeline import experiment_folder, run_groups, stored
+from etobs.experiments.pipeline import experiment_folder, other_chunks, run_groups, stored
 from etobs.experiments.spec import SweepSpec
 from etobs.experiments.store import ResultStore, atomic_write, last_line
 from etobs.experiments.tables import (
@@ -21,8 +21,8 @@ from etobs.experiments.tables import (
     not_completed,
     run_rows,
     status_notes,
-    to_csv,
     to_markdown,
+    write_table,
 )
 
 
@@ -34,17 +34,22 @@ class SweepResult:
     ----------
     spec : SweepSpec
     out : Path
-        Output folder (``runs.csv``, ``aggregate.csv``, ``report.md``, ``chunks/``).
+        Output folder (``runs.csv``, ``aggregate.csv``, each with a ``.parquet`` twin,
+        ``report.md``, ``chunks/``).
     runs : list of dict
         One record per finished run.
     aggregate : list of dict
-        Statistics per (row, scenario).
+        Statistics per (row, scenario): of transmissions and error, and per node of
+        transmissions and minimum inter-event time (:func:`~etobs.experiments.tables.aggregate`).
     computed, reused : int
         Runs computed by this call, and runs found already stored.
     failures : list of dict
         Chunks that failed (with their error); their runs are missing from ``runs``.
     params : tuple of str
         Flattened parameter columns (``sigma1``, ``sigma2``, ``noise``...).
+    other_chunks : int
+        Chunk files in ``out/chunks`` written for another spec or etobs version (or
+        another format of records): not used, their runs computed anew for this one.
 
     """
 
@@ -56,6 +61,7 @@ class SweepResult:
     reused: int
     failures: list[dict[str, Any]]
     params: tuple[str, ...] = ()
+    other_chunks: int = 0
 
     @property
     def complete(self) -> bool:
@@ -72,7 +78,7 @@ def run_sweep(
     scheduler: str | None = None,
     client: Any = None,
     chunk: int | None = None,
-    progress: bool = True,
+    progress: bool | None = None,
 ) -> SweepResult:
     """Run (or resume) a sweep into ``out`` and write its tables.
 
@@ -91,8 +97,10 @@ def run_sweep(
         A client to run on (with ``executor="dask"``).
     chunk : int, optional
         Runs per chunk (default: the spec's ``execution.chunk_size``, else 20).
-    progress : bool
-        Show a progress line on stderr.
+    progress : bool or None
+        A progress bar on stderr counting runs (failed ones in its postfix): ``None``
+        (default) when stderr is a terminal, ``True``/``False`` to force it
+        (:func:`etobs._progress.progress_bar`).
 
     """
     if not isinstance(spec, SweepSpec):
@@ -123,10 +131,10 @@ def collect(spec: SweepSpec, store: ResultStore, *, computed: int = 0, reused: i
         for k in flatten_params(params):
             if k not in param_names:
                 param_names.append(k)
-        groups.append((r, spec.scenarios[s].name, params, list(got.records.values())))
+        groups.append(({"row": r, "scenario": spec.scenarios[s].name}, params, list(got.records.values())))
         failures += got.failures
     runs = run_rows(groups)
-    keys = [(r, name, flatten_params(params)) for r, name, params, _ in groups]
+    keys = [(labels, flatten_params(params)) for labels, params, _ in groups]
     return SweepResult(
         spec=spec,
         out=store.out,
@@ -136,13 +144,14 @@ def collect(spec: SweepSpec, store: ResultStore, *, computed: int = 0, reused: i
         reused=reused,
         failures=failures,
         params=tuple(param_names),
+        other_chunks=other_chunks(spec, store),
     )
 
 
 def _write_outputs(result: SweepResult, started: str) -> None:
     out = result.out
-    atomic_write(out / "runs.csv", to_csv(result.runs))
-    atomic_write(out / "aggregate.csv", to_csv(result.aggregate))
+    write_table(out, "runs", result.runs)
+    write_table(out, "aggregate", result.aggregate)
     meta = {
         "name": result.spec.name,
         "seed": result.spec.initial_states.seed,
@@ -151,6 +160,7 @@ def _write_outputs(result: SweepResult, started: str) -> None:
         "computed": result.computed,
         "reused": result.reused,
         "failed_chunks": len(result.failures),
+        "other_chunks": result.other_chunks,
         "started": started,
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "versions": _versions(),
@@ -164,6 +174,7 @@ def _write_outputs(result: SweepResult, started: str) -> None:
         "completed",
         "transmissions_mean",
         "transmissions_std",
+        *_node_means(result.aggregate),
         "error_mean",
         "error_std",
     ]
@@ -178,6 +189,12 @@ def _write_outputs(result: SweepResult, started: str) -> None:
     for f in result.failures:
         last = last_line(f)
         text.append(f"- failed: {f.get('where', '')} runs {f['runs'][0]}..{f['runs'][-1]}: {last}")
+    if result.other_chunks:  # e.g. written by another etobs version: say why runs were computed again
+        text += [
+            "",
+            f"{result.other_chunks} chunk files in `chunks/` belong to another spec or etobs version "
+            "and were not used (runs are recomputed for this one; delete them or use a new folder).",
+        ]
     statuses = [r["status"] for r in result.runs]
     if not_completed(statuses):  # each run's status is in runs.csv; say here why runs stopped early
         text += ["", f"Runs not completed: {not_completed(statuses)} (see `status` in runs.csv)."]
@@ -185,7 +202,15 @@ def _write_outputs(result: SweepResult, started: str) -> None:
     atomic_write(out / "report.md", "\n".join(text) + "\n")
 
 
+def _node_means(aggregate: list[dict[str, Any]]) -> list[str]:
+    """``transmissions_node0_mean``, ... for the report, when there is more than one node."""
+    names = [c for c in (aggregate[0] if aggregate else {}) if c.startswith("transmissions_node")]
+    means = [c for c in names if c.endswith("_mean")]
+    return means if len(means) > 1 else []
+
+
 def _versions() -> dict[str, str]:
+    import pyarrow
     import scipy
 
     from etobs import __version__
@@ -194,6 +219,7 @@ def _versions() -> dict[str, str]:
         "etobs": __version__,
         "numpy": np.__version__,
         "scipy": scipy.__version__,
+        "pyarrow": pyarrow.__version__,
         "python": platform.python_version(),
     }
 
