@@ -302,12 +302,16 @@ def test_repr_names_at_most_eight_nodes():
 
 def test_progress_bar_counts_the_runs_when_forced_on(capsys):
     pb = linear.problem(RULE)
-    simulate(pb, np.tile(X0, (2, 1)), 0.5, z0=Z0, progress=True)
+    X = np.random.default_rng(5).uniform(-2, 2, (19, 2))  # more runs than one chunk of the engine
+    on = simulate(pb, X, 0.5, z0=Z0, progress=True)
     err = capsys.readouterr().err
-    assert "simulate" in err and "4/4" in err
-    simulate(pb, X0, 0.5, z0=Z0, progress=False, backend="scipy")
+    assert "simulate" in err and "19/19" in err
+    off = simulate(pb, X, 0.5, z0=Z0, progress=False)
     assert capsys.readouterr().err == ""
-    simulate(pb, X0, 0.5, z0=Z0, progress=True, backend="scipy")
+    # solved in chunks (with a bar) or in one pass (without): the same numbers
+    for key in ("run", "rule", "t", "j", "x"):
+        np.testing.assert_array_equal(getattr(on.transmissions, key), getattr(off.transmissions, key))
+    simulate(pb, X[:2], 0.5, z0=Z0, progress=True, backend="scipy")
     assert "2/2" in capsys.readouterr().err
 
 

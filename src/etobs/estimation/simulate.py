@@ -114,7 +114,8 @@ def simulate(
 
         cp = compile_problem(problem)  # before the bar: it counts runs solved, not the compile
     with progress_bar(B, "simulate", enabled=progress) as bar:
-        kw = {"options": options, "save": solver_save, "progress": bar.update}
+        # no callback for a bar that is off: the engine then solves the batch in one pass
+        kw = {"options": options, "save": solver_save, "progress": None if bar.disable else bar.update}
         if backend == "engine":
             sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, **kw)
         else:
