@@ -165,7 +165,7 @@ def test_check_without_P_says_which_P_it_used(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "P found by check_gain for the given L (the trace-1 P with the largest common decrease" in out
     assert "note: no observer.P given: P was found by check_gain for observer.L" in out
-    assert "give observer.P (your design's ObserverGain.P)" in out
+    assert "give observer.P (e.g. the ObserverGain.P of the design that gave L)" in out
     bound = float(out.split("ultimate bound on |x - xhat|: ")[1].split()[0])
     assert bound != pytest.approx(cert.error_bound, rel=1e-2)  # another P, another bound: both valid
 

@@ -374,3 +374,16 @@ def test_iss_gains_refuse_a_P_that_is_not_theirs():
         InputError, match=r"`P` has extreme eigenvalues \(0.19\d+, 3.6\d+\); got lambda_min_P = 1"
     ):
         replace(ISS, lambda_min_P=1.0)
+
+
+def test_estimate_output_rate_shows_progress_through_simulate(capsys):
+    # issue 15, item 4: check's E_estimate ran its simulations without any progress shown
+    problem = robot_arm(noise=False)
+    quiet = estimate_output_rate(problem, X0_PAPER, 0.5, grid_step=1e-2, progress=False)
+    assert capsys.readouterr().err == ""
+    shown = estimate_output_rate(problem, X0_PAPER, 0.5, grid_step=1e-2, progress=True)
+    assert "simulate" in capsys.readouterr().err and np.array_equal(quiet, shown)
+    with pytest.raises(
+        InputError, match=r"`progress` must be None \(a bar when stderr is a terminal\), True"
+    ):
+        estimate_output_rate(problem, X0_PAPER, 0.5, progress="yes")

@@ -184,9 +184,9 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
         gain = check_gain(A, C, L, verts, P=P, Q=Q)  # with P: only re-checked, as certify's P
         if P is None:
             note = (
-                "no observer.P given: P was found by check_gain for observer.L; the gains and the "
-                "error bound depend on P, so give observer.P (your design's ObserverGain.P) to certify "
-                "with it (it may give a smaller bound)"
+                "no observer.P given: P was found by check_gain for observer.L; the ISS gains and the "
+                "error bound depend on P, so give observer.P (e.g. the ObserverGain.P of the design that "
+                "gave L) to certify with that P (its bound may be smaller)"
             )
     if not gain.ok:  # the LMIs fail: no ISS gains, so bad input rather than a failed condition
         what = "`observer.L` with `observer.P`" if P is not None else "`observer.L`"

@@ -1,4 +1,4 @@
-"""Estimates of the bound ``E`` on ``|dh_i/dx f_p|`` (eq. (38)) from simulations."""
+"""Estimates of the bound ``E`` on ``|dh_i/dx f_p|`` (eq. (36)) from simulations."""
 
 from __future__ import annotations
 
@@ -19,10 +19,11 @@ def estimate_output_rate(
     *,
     grid_step: float = 1e-3,
     options: SolverOptions | None = None,
+    progress: bool | None = None,
 ) -> np.ndarray:
     """Largest ``|d y_i / dt| = |dh_i/dx f_p(x, u, v)|`` seen on simulated runs, per node.
 
-    Theorem 3's ``tau_i = gamma_i^{-1}(eps_i) / E`` needs a bound ``E`` on this rate along
+    Theorem 4's ``tau_i = gamma_i^{-1}(eps_i) / E`` needs a bound ``E`` on this rate along
     the solutions; this estimates it on a grid of the simulated plant states (a lower
     estimate of the true bound: use a margin, or a bound derived from the model when one
     is known). The derivative is a central difference of ``h`` along ``f_p``.
@@ -35,6 +36,12 @@ def estimate_output_rate(
     t_end : float
     grid_step : float
         Spacing of the time grid on which the rate is evaluated.
+    options : SolverOptions, optional
+        Solver settings of the simulation.
+    progress : bool or None
+        A progress bar on stderr counting the runs simulated (the long part), as in
+        :func:`~etobs.simulate`: ``None`` (default) shows it when stderr is a terminal
+        and the work takes over a second.
 
     Returns
     -------
@@ -45,7 +52,9 @@ def estimate_output_rate(
     v.real("t_end", t_end, lower=0.0, lower_open=True)
     v.real("grid_step", grid_step, lower=0.0, lower_open=True)
     grid = np.arange(0.0, t_end + grid_step / 2, grid_step)
-    res = simulate(problem, x0, t_end, options=options, save=SaveAt(steps=False, grid=grid))
+    res = simulate(
+        problem, x0, t_end, options=options, save=SaveAt(steps=False, grid=grid), progress=progress
+    )
     traj = res.on_grid()
     x = traj.x.reshape(-1, problem.plant.n_x)
     t = np.broadcast_to(grid, traj.t.shape).reshape(-1)
