@@ -153,6 +153,18 @@ def test_a_killed_driver_resumes_and_every_run_is_present_once(tmp_path):
     assert clean.returncode == 0
     assert (tmp_path / "clean" / "runs.csv").read_text() == (out / "runs.csv").read_text()
     assert not list((out / "chunks").glob(".*tmp"))  # no half-written files left visible
+    import pyarrow.parquet as pq
+
+    assert pq.read_table(tmp_path / "clean" / "runs.parquet").equals(pq.read_table(out / "runs.parquet"))
+
+
+def test_a_dead_writers_temporary_table_is_removed_and_the_tables_are_whole(tiny, tmp_path):
+    import pyarrow.parquet as pq
+
+    tmp_path.joinpath(".runs.parquet.x1y2.tmp").write_bytes(b"PAR1 half")  # killed mid-write
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert not list(tmp_path.glob(".*.tmp"))
+    assert pq.read_table(tmp_path / "runs.parquet").num_rows == tiny.n_runs
 
 
 def test_dask_executor_gives_the_same_numbers(tiny, tmp_path, dask_cluster):
