@@ -9,6 +9,7 @@ from typing import Any, NamedTuple, overload
 
 import numpy as np
 
+from etobs._validate import shown
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.status import Status, status_message
 
@@ -144,7 +145,7 @@ class JumpLog:
                 int(self.run[k]), int(self.rule[k]), float(self.t[k]), int(self.j[k]), self.x[k].copy()
             )
         if not isinstance(key, slice):
-            key = np.asarray(key)
+            given, key = key, np.asarray(key)
             if key.dtype == bool:
                 if key.shape != (L,):
                     raise IndexError(
@@ -152,8 +153,9 @@ class JumpLog:
                     )
             elif key.ndim != 1 or not (np.issubdtype(key.dtype, np.integer) or key.size == 0):
                 raise InputTypeError(
-                    "a JumpLog is indexed by an int, a slice, a boolean mask or a 1-D array of ints; "
-                    f"got {type(key).__name__} of dtype {key.dtype} and shape {key.shape}"
+                    "a JumpLog is indexed by an int, a slice, a boolean mask or a 1-D array of ints "
+                    f"(its columns are attributes: log.t, log.x); got {type(given).__name__} "
+                    f"{shown(given)} (dtype {key.dtype}, shape {key.shape})"
                 )
             else:
                 key = key.astype(np.int64)
@@ -402,7 +404,8 @@ class HybridSolution:
         steps = f"{int(self.n_steps.sum())} accepted, {int(self.n_rejected.sum())} rejected"
         return "\n".join(
             [
-                f"HybridSolution ({self.backend}): {self.n_runs} runs on t in [{t0:g}, {t1:g}]; {status}",
+                f"HybridSolution ({self.backend}): {self.n_runs} run{'' if self.n_runs == 1 else 's'} "
+                f"on t in [{t0:g}, {t1:g}]; {status}",
                 f"  jumps: {len(self.jumps)} ({', '.join(per_rule) or 'no rule'}); steps: {steps}",
                 f"  kept: {'; '.join(kept) or 'final states only'}",
             ]
