@@ -2,7 +2,7 @@
 
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.reference import solve_reference
-from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid
+from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, JumpRow, SavedGrid
 from etobs.hybrid.solver import solve
 from etobs.hybrid.status import Status, status_message
 from etobs.hybrid.system import BatchedSystem, HybridSystem
@@ -14,6 +14,7 @@ __all__ = [
     "HybridSolution",
     "HybridSystem",
     "JumpLog",
+    "JumpRow",
     "SaveAt",
     "SavedGrid",
     "SolverOptions",
