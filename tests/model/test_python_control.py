@@ -1,5 +1,6 @@
 """Plants from python-control systems (etobs.model.python_control)."""
 
+import re
 import subprocess
 import sys
 
@@ -286,3 +287,27 @@ def test_the_models_page_runs_as_written(capsys):
     assert "engine" in out and "completed" in out
     # the page's claim: the StateSpace and the matrices give the same transmissions
     np.testing.assert_array_equal(ns["from_control"].transmissions.x, ns["from_matrices"].transmissions.x)
+
+
+class _Oscillator:
+    """A model written as a class: its bound method is the updfcn."""
+
+    def update(self, t, x, u, params):
+        return np.array([x[1], -x[0]])
+
+
+def test_systems_known_not_to_compile_run_on_the_reference_under_auto_and_say_why():
+    gain = ct.nlsys(None, lambda t, x, u, p: -0.5 * u, inputs=["y"], outputs=["d"], name="k")
+    closed = ct.interconnect([_vdp(), gain], inputs=[], outputs=["y"], name="closed")
+    method = ct.nlsys(_Oscillator().update, vdp_output, states=2, outputs=1, name="method")
+    for sys_, why in (
+        (closed, r"the plant 'closed' is a python-control InterconnectedSystem, .*numba cannot compile"),
+        (method, r"the plant 'method' has an updfcn that is a method, not a function"),
+    ):
+        pb = _problem(python_control_plant(sys_), _vdp_observer(), VDP_NODES)
+        res = simulate(pb, X0[0], 1.0)
+        assert res.backend == "scipy" and res.status_labels() == ["completed"]
+        assert re.search(f"auto: {why}", res.backend_reason), res.backend_reason
+        assert "so the scipy reference runs it" in res.backend_reason
+        with pytest.raises(InputError, match=f"backend='engine': {why}.*use backend='scipy'"):
+            simulate(pb, X0[0], 1.0, backend="engine")

@@ -15,7 +15,8 @@ send-on-delta, periodic, relative, generalized), any K-function and signal, meas
 noise, input nodes (section 7.3), the observer-copy hold (Remark 3) and networks (delay,
 loss, reordering, capacity; each packet's fate drawn as :mod:`etobs.model.fates` says, so
 the engine and the reference draw the same). :func:`engine_support` says why a problem is
-not covered: a rule of the user's own.
+not covered: a rule of the user's own, or a plant whose code numba cannot compile by its
+construction (a python-control ``InterconnectedSystem``, :mod:`etobs.model.python_control`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 from etobs.errors import InputError, ModelError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.compiled import CompiledSystem
+from etobs.model.python_control import PYTHON_ONLY
 from etobs.model.rules import engine_form_of
 
 
@@ -55,6 +57,10 @@ def engine_support(problem: EstimationProblem) -> str:
     ]
     if used:
         return "the engine runs etobs' rules; this problem uses " + ", ".join(used)
+    # a plant whose code is known not to compile (etobs.model.python_control marks it)
+    why = getattr(problem.plant.f_p, PYTHON_ONLY, "")
+    if why:
+        return f"the plant {problem.plant.name!r} {why}"
     return ""
 
 

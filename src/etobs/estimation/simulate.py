@@ -59,7 +59,8 @@ def simulate(
         thread, with the model's functions compiled; it runs every etobs rule and
         extension. ``"scipy"``: the ``solve_ivp`` reference, which calls your Python
         functions as they are (any Python). ``"auto"`` (default) is the engine, or the
-        reference for a rule of your own (a ``TriggerRule`` the engine cannot compile);
+        reference for a rule of your own (a ``TriggerRule`` the engine cannot compile) or a
+        python-control system whose code cannot be compiled (an ``InterconnectedSystem``);
         the result's ``backend`` and ``backend_reason`` say which and why. ``"numba"`` is
         an earlier name of ``"engine"``; the batched numpy solver (``"numpy"``,
         ``"fast"``) was retired.

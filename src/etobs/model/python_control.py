@@ -25,9 +25,12 @@ A ``StateSpace`` becomes :func:`~etobs.model.linear.linear_plant` (its matrices 
 plant's ``params``). A ``NonlinearIOSystem``'s ``updfcn`` and ``outfcn`` are called by the
 plant's functions; the engine compiles them with numba when they are numpy or ``math``
 code that reads ``params`` by key (``params["mu"]``, ``params.get("mu", 1.0)``): inside
-compiled code ``params`` is a numba typed dict from ``str`` to ``float``. Functions numba
-cannot compile (any Python; an ``InterconnectedSystem``, which runs python-control's own
-code) run with ``simulate(..., backend="scipy")``; the engine says so when it is asked.
+compiled code ``params`` is a numba typed dict from ``str`` to ``float``. An
+``InterconnectedSystem`` (which runs python-control's own code) or a method as ``updfcn``
+cannot be compiled, which is known from the system: ``simulate``'s ``backend="auto"`` runs
+those on the scipy reference and its ``backend_reason`` says why. Other functions numba
+cannot compile (any Python) are a ``ModelError`` naming ``f_p`` when the engine runs, as
+for any plant; ``backend="scipy"`` runs them as written.
 
 python-control is an optional dependency (``pip install 'etobs[control]'``), imported
 only when a system is converted.
@@ -35,6 +38,7 @@ only when a system is converted.
 
 from __future__ import annotations
 
+import types
 from collections.abc import Callable
 from typing import Any
 
@@ -44,6 +48,10 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError, ModelError
 from etobs.model.linear import check_no_feedthrough, linear_plant
 from etobs.model.plant import Plant
+
+#: The attribute of a plant's ``f_p`` that says why the engine cannot compile it
+#: (read by :func:`etobs.estimation.compiled.engine_support`).
+PYTHON_ONLY = "etobs_python_only"
 
 
 def python_control_plant(
@@ -187,7 +195,24 @@ def _nonlinear_plant(
         params=values if keys else None,
     )
     _probe(sys, plant, merged, outs, n_in)
+    why = _python_only(sys)
+    if why:  # the engine cannot compile it: simulate's "auto" runs the reference and says why
+        setattr(plant.f_p, PYTHON_ONLY, why)
     return plant
+
+
+def _python_only(sys: Any) -> str:
+    """Why numba cannot compile the system's functions, known from their kind alone (``""``: it may)."""
+    if type(sys).__name__ == "InterconnectedSystem":
+        return (
+            "is a python-control InterconnectedSystem, whose update runs python-control's own Python "
+            "code, which numba cannot compile"
+        )
+    for what in ("updfcn", "outfcn"):
+        fn = getattr(sys, what)
+        if fn is not None and not isinstance(fn, types.FunctionType) and not hasattr(fn, "py_func"):
+            return f"has an {what} that is a {type(fn).__name__}, not a function, which numba cannot compile"
+    return ""
 
 
 def _functions(
