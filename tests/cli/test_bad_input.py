@@ -280,7 +280,7 @@ OWN = 'A = [[0.0, 1.0], [-1.0, -0.2]]\nC = [[1.0, 0.0]]\nL = "design"\nc_v = 0.1
         (
             PAPER.replace("c = [0.1, 0.1]", "c = [0.1, 0.1, 0.1]"),
             "",
-            r"`observer`: `c` must have one constant per node \(2\); got 3",
+            r"`observer.c` must have one constant per node \(2\); got 3",
         ),
     ],
 )

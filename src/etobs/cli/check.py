@@ -36,8 +36,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import inspect
+import re
 import sys
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -53,6 +54,7 @@ from etobs.errors import InputError, InputTypeError
 from etobs.examples.registry import make_problem, resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
+_OBSERVER_KEYS = ("structure", "A", "C", "G", "H", "slopes", "L", "P", "Q", "c_v", "c")
 
 
 def add_parser(sub: Any) -> None:
@@ -74,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     problem = make_problem(system["factory"], params, "system.params")
     iss = None
     if "observer" in top:
-        with _table("observer"):
+        with _table("observer", _OBSERVER_KEYS):
             iss, L, p_note = _iss(top["observer"], problem)
         # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
         if "L" not in params and "L" in inspect.signature(resolve_factory(system["factory"])).parameters:
@@ -120,14 +122,23 @@ def _certify(problem: Any, iss: Any, g: dict[str, Any]) -> Any:
 
 
 @contextlib.contextmanager
-def _table(key: str) -> Iterator[None]:
-    """Name the spec table ``key`` in an input error raised by the design functions it feeds."""
+def _table(key: str, names: Collection[str]) -> Iterator[None]:
+    """Name the spec key in an input error raised by the design functions table ``key`` feeds.
+
+    The functions name their arguments: one named like a key of the table (``names``) is
+    that key (quadratic_iss_gains's "`c` must have ..." is about `observer.c`); a message
+    that already names a spec key is kept; any other gets the table's name in front.
+    """
     try:
         yield
     except SpecError:
         raise
-    except (InputError, InputTypeError) as exc:  # e.g. quadratic_iss_gains's "`c` must have 2 entries"
-        raise SpecError(f"`{key}`: {exc}") from exc
+    except (InputError, InputTypeError) as exc:
+        msg = str(exc)
+        arg = re.match(r"`([A-Za-z_]\w*)(?=[`\[])", msg)
+        if arg and arg.group(1) in names:
+            raise SpecError(f"`{key}.{msg[1:]}") from exc
+        raise SpecError(msg if msg.startswith(f"`{key}.") else f"`{key}`: {msg}") from exc
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -138,7 +149,7 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
     """The ISS gains of the spec's observer, its gain ``L``, and a note on how ``P`` was found."""
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
 
-    keys = {"structure", "A", "C", "G", "H", "slopes", "L", "c_v", "c", "Q", "P"}
+    keys = set(_OBSERVER_KEYS)
     needed = {
         "L": "'design', 'paper' or a matrix",
         "c_v": "a number > 0",
