@@ -131,3 +131,13 @@ def test_margins_are_validated():
         observer_gain(A, C, VERTS, margin=0.1)
     with pytest.raises(InputError, match="`margin` must be > 0; got -1"):
         check_gain(A, C, L_PAPER, VERTS, margin=-1.0)
+
+
+def test_min_gain_on_a_stable_linear_plant_is_no_gain():
+    # what observer_gain's docstring says of "min_gain": with A Hurwitz, a large P alone meets Q
+    from tests.design import chain
+
+    g = observer_gain(chain.A, chain.C)
+    assert g.ok and np.abs(g.L).max() < 1e-6
+    fast = observer_gain(chain.A, chain.C, objective="max_decay", max_gain=5.0)
+    assert fast.ok and fast.decay_rate > 10 * g.decay_rate

@@ -152,7 +152,9 @@ def observer_gain(
     objective : {"min_gain", "max_decay"}
         The LMIs are homogeneous and let ``L`` grow without bound, so the design fixes
         ``P >= I`` (then ``||L|| <= ||W||``) and ``"min_gain"`` minimizes the spectral norm
-        of ``W = P L`` (the smallest gain with the required decrease; a slow observer),
+        of ``W = P L`` (the smallest gain with the required decrease; a slow observer,
+        and ``L = 0`` when ``A`` is Hurwitz and there are no vertices: the LMIs are
+        homogeneous, so a large enough ``P`` meets any ``Q`` with the plant's own decay),
         ``"max_decay"`` minimizes ``lambda_max(P)``, maximizing the guaranteed rate
         ``lambda_min(Q) / lambda_max(P)``, under ``||W|| <= max_gain``.
     max_gain : float, optional
