@@ -591,3 +591,20 @@ def test_the_progress_bar_counts_runs_reused_runs_and_failed_runs(tmp_path, caps
 def test_a_parameter_may_not_take_the_name_of_a_per_node_column(name):
     with pytest.raises(SpecError, match=rf"parameter `rows\[0\].{name}` clashes with a result column"):
         parse_spec(raw_spec(rows=[{name: 1.0}]))
+
+
+def test_a_chunk_draws_no_bar_of_its_own_whatever_the_terminal(tiny, tmp_path, monkeypatch, capsys):
+    import etobs.experiments.runner as runner
+
+    asked = []
+    real = runner.simulate
+
+    def recorded(*args, progress=None, **kw):
+        asked.append(progress)
+        return real(*args, progress=progress, **kw)
+
+    monkeypatch.setattr(runner, "simulate", recorded)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # as on a terminal
+    run_sweep(tiny, tmp_path, executor="serial", progress=False)
+    assert asked == [False] * 12  # 4 groups x 3 chunks: no "simulate" bar inside the sweep's
+    assert capsys.readouterr().err == ""

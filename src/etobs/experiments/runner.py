@@ -52,6 +52,7 @@ def run_task(kind: type[Experiment], raw_spec: dict[str, Any], task: Task) -> li
         save=SaveAt(steps=False, grid=spec.metrics.grid(), max_distance="estimation_error"),
         backend=spec.backend,
         run_ids=np.array(task.runs),
+        progress=False,  # the experiment's one bar counts runs; a chunk (maybe in a worker) draws none
     )
     seconds = (time.perf_counter() - start) / len(task.runs)
     counts = transmission_counts(res, spec.metrics.transmissions_window, nodes="all")
