@@ -65,17 +65,43 @@ def test_steps_jump_to_the_values_sent_at_the_transmissions_and_only_there(arcs_
         assert ax.get_ylabel() == f"sensor {i + 1}"
 
 
-def test_from_the_grid_the_steps_hold_between_its_points_and_the_ticks_stay_exact(grid_only):
+def test_from_the_grid_the_steps_come_exact_from_the_transmission_log(grid_only, arcs_only):
     grid = grid_only.on_grid()
     _, axes = plot_held_outputs(grid_only, run=1)
-    assert "from the save grid" in axes[0].get_title()
+    assert "steps from the transmission log (exact)" in axes[0].get_title()
+    arc = arcs_only.arc(1)  # the same runs, solved keeping the arcs
     for i, ax in enumerate(axes):
+        log = grid_only.transmissions.select(run=1, rule=i)
+        truth = arcs_only.transmissions.select(run=1, rule=i)
+        np.testing.assert_allclose(log.t, truth.t, rtol=0, atol=1e-12)
         t, held, line = _line(ax, rf"$\bar y_{{{i + 1}}}$")
         assert line.get_drawstyle() == "steps-post"
-        np.testing.assert_array_equal(t, grid.t[1])
-        np.testing.assert_array_equal(held, grid.ybar[1][:, i])
-        assert not [ln for ln in ax.get_lines() if ln.get_label() == "values sent"]  # not known there
-        np.testing.assert_array_equal(_ticks(ax), grid_only.transmission_times(1, i))
+        # a step at each transmission instant, to the value the arc holds after it
+        np.testing.assert_array_equal(t, np.concatenate([[0.0], log.t, [T_END]]))
+        after = arc.ybar[_jump_rows(arc, truth) + 1, i]
+        np.testing.assert_allclose(held[1:-1], after, rtol=0, atol=1e-12)
+        assert held[0] == grid.ybar[1][0, i] and held[-1] == held[-2]
+        # and at every grid point, the step's value is the grid's (the grid keeps the
+        # value before a jump at a jump time, hence side="left")
+        k = np.searchsorted(t, grid.t[1], side="left") - 1
+        np.testing.assert_array_equal(held[np.maximum(k, 0)], grid.ybar[1][:, i])
+        t_sent, sent, _ = _line(ax, "values sent")
+        np.testing.assert_array_equal(t_sent, log.t)
+        np.testing.assert_array_equal(sent, held[1:-1])
+        np.testing.assert_array_equal(_ticks(ax), log.t)
+
+
+def test_from_the_grid_with_a_network_the_held_values_are_the_grids():
+    pb = two_sensors(network=Network(Link(delay=0.1)))
+    save = SaveAt(steps=False, grid=np.linspace(0.0, 2.0, 81))
+    result = simulate(pb, x0=X0[0], t_end=2.0, save=save, backend="scipy")
+    grid = result.on_grid()
+    _, axes = plot_held_outputs(result)
+    assert "from the save grid: held values at its points" in axes[0].get_title()
+    t, held, line = _line(axes[0], r"$\bar y_{1}$")
+    assert line.get_drawstyle() == "steps-post"
+    np.testing.assert_array_equal(t, grid.t[0])
+    np.testing.assert_array_equal(held, grid.ybar[0][:, 0])
 
 
 def test_with_arcs_and_grid_the_grid_points_join_the_arcs(arcs_and_grid):

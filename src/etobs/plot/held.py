@@ -9,6 +9,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.estimation.result import EstimationResult
+from etobs.estimation.tables import sent_column_names, sent_values
 from etobs.model.signals import Zero
 from etobs.plot.arc import solution_rows
 from etobs.plot.figures import _figure, _node_name, _run
@@ -31,7 +32,7 @@ def _nodes(result: EstimationResult, nodes: Any) -> tuple[int, ...]:
 
 
 def _measured(result: EstimationResult, t: np.ndarray, j: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
-    """What each node compares its held value with, one ``(K, size)`` array per node.
+    """What each node measures, to compare with what it sent: one ``(K, size)`` array per node.
 
     ``ytilde_i`` (``ytilde_i - yhat_i`` in the observer-copy hold) is ``ybar_i - e_i``
     with ``e`` as :meth:`EstimationResult.arc` computes it (eq. (49)); an input node's
@@ -42,6 +43,23 @@ def _measured(result: EstimationResult, t: np.ndarray, j: np.ndarray, q: np.ndar
     y = tr.ybar - tr.e
     u = pb.u(np.asarray(t, dtype=float)) if pb.input_nodes else None
     return [y[:, ch.index] if ch.kind == "y" else u[:, ch.index] for ch in pb.layout.channels]  # type: ignore[index]
+
+
+def _steps(
+    t: np.ndarray, held: np.ndarray, t_sent: np.ndarray, sent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The held value as a ``steps-post`` line: ``held[0]`` at ``t[0]``, then each value sent.
+
+    Without a network the observer holds what the node last sent (eq. (5)), so the
+    transmissions log gives the steps exactly, at their instants, whatever the grid.
+    At a transmission time the grid keeps the value before the jump, so a transmission at
+    ``t[0]`` is a step there too.
+    """
+    after = t_sent >= t[0]
+    t_sent, sent = t_sent[after], sent[after]
+    end = max(t[-1], t_sent[-1]) if t_sent.size else t[-1]
+    last = sent[-1:] if sent.size else held[:1]
+    return np.concatenate([t[:1], t_sent, [end]]), np.concatenate([held[:1], sent, last])
 
 
 def _labels(result: EstimationResult, node: int) -> list[tuple[str, str]]:
@@ -62,19 +80,21 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     One panel per node. Thin line: what the node measures (``y_i``, ``ytilde_i`` with
     noise, ``ytilde_i - yhat_i`` with ``hold="innovation"``, ``u_k`` for an input node);
     thick steps: what the observer holds (``ybar_i``, ``ubar_k``). Ticks along the
-    bottom mark the node's transmission instants (``result.transmissions``); from an
-    arc, dots mark the values sent. With a :class:`~etobs.model.network.Network` the
-    held value changes when a packet arrives, after its transmission, or not at all
-    when it is lost.
+    bottom mark the node's transmission instants and dots the values sent, both from
+    ``result.transmissions``. With a :class:`~etobs.model.network.Network` the held
+    value changes when a packet arrives, after its transmission, or not at all when it
+    is lost.
 
     Parameters
     ----------
     result : EstimationResult
-        With the arcs kept (``SaveAt(steps=True)``): exact steps, and the values sent.
-        Else from the save grid (``SaveAt(grid=...)``): the held values are known only at
-        the grid's points, so each step is drawn at the first grid point after its
-        transmission; the transmission instants are exact. The first panel's title says
-        which.
+        With the arcs kept (``SaveAt(steps=True)``): exact steps and measured values
+        along the solver's steps (and the grid's points when kept too). Else from the save
+        grid (``SaveAt(grid=...)``): the measured values at its points, and the steps
+        exact from the transmission log (the observer holds what the node last sent,
+        eq. (5)), except with a network, where the held values are known only at the
+        grid's points (each step drawn at the first point after it). The first panel's
+        title says which.
     run : int
         Which run.
     nodes : int or sequence of int, optional
@@ -108,25 +128,28 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     source = "grid" if kept == "grid" else "arc"
     measured = _measured(result, t, j, q)
     pb = result.problem
+    # from the log alone, without a network: the observer holds what the node last sent
+    exact = source == "arc" or pb.network is None
     fig, axes = _figure(len(chosen), 1.9 * len(chosen) + 0.8)
     log = result.transmissions.select(run=run)
+    columns = sent_column_names(result)
     for ax, node in zip(axes, chosen, strict=True):
         ch = pb.layout.channels[node]
         sent = log.select(rule=node)
-        # the value sent at (t_k, j_k) is what the node measured just before its jump
-        before = np.searchsorted(j, sent.j, side="right") - 1
+        values = sent_values(result, sent)[:, [columns.index(f"sent_{ch.kind}{k}") for k in ch.index]]
         for m, (held_label, measured_label) in enumerate(_labels(result, node)):
             color = f"C{m % 10}"
             ax.plot(t, measured[node][:, m], color=color, lw=0.8, alpha=0.7, label=measured_label)
-            # from an arc, the held value on both sides of each jump draws an exact step;
-            # on a grid, each value holds from its point to the next
-            style = "default" if source == "arc" else "steps-post"
-            ax.plot(t, q[:, ch.held[m]], color=color, lw=1.6, drawstyle=style, label=held_label)
-            if source == "arc":
-                label = "values sent" if m == 0 else None
-                ax.plot(
-                    sent.t, measured[node][before, m], ls="none", marker="o", ms=3.5, color=color, label=label
-                )
+            if source == "arc":  # the arc has the held value on both sides of each jump
+                th, held, style = t, q[:, ch.held[m]], "default"
+            elif exact:
+                th, held = _steps(t, q[:, ch.held[m]], sent.t, values[:, m])
+                style = "steps-post"
+            else:  # with a network it changes on delivery: known only at the grid's points
+                th, held, style = t, q[:, ch.held[m]], "steps-post"
+            ax.plot(th, held, color=color, lw=1.6, drawstyle=style, label=held_label)
+            label = "values sent" if m == 0 else None
+            ax.plot(sent.t, values[:, m], ls="none", marker="o", ms=3.5, color=color, label=label)
         ax.plot(
             sent.t,
             np.full(len(sent), 0.03),  # just above the bottom edge, clear of the axis ticks
@@ -145,8 +168,10 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     axes[-1].set_xlabel("t [s]")
     if source == "arc":
         note = "from the hybrid arc: exact steps; dots: values sent"
+    elif exact:
+        note = "steps from the transmission log (exact); measured values on the save grid; dots: values sent"
     else:
-        note = "from the save grid: steps at its points (keep arcs for exact steps); ticks exact"
+        note = "from the save grid: held values at its points (keep arcs for exact steps); dots: values sent"
     if pb.network is not None:
         note += "; held values change on delivery"
     axes[0].set_title(note, fontsize="small")
