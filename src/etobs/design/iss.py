@@ -70,7 +70,10 @@ class QuadraticISS:
         v.real("lambda_min_P", self.lambda_min_P, lower=0.0, lower_open=True)
         v.real("lambda_max_P", self.lambda_max_P, lower=self.lambda_min_P)
         if self.P is not None:  # the error bound divides by lambda_min_P: it must be P's
-            eig = np.linalg.eigvalsh(v.matrix("P", self.P, (None, None)))
+            P = np.array(v.matrix("P", self.P, (None, None)))  # a copy, read-only: the gains rest on it
+            P.setflags(write=False)
+            object.__setattr__(self, "P", P)
+            eig = np.linalg.eigvalsh(P)
             if not np.allclose(eig[[0, -1]], [self.lambda_min_P, self.lambda_max_P], rtol=1e-9, atol=0.0):
                 raise InputError(
                     f"`P` has extreme eigenvalues ({eig[0]:.6g}, {eig[-1]:.6g}); got lambda_min_P = "
