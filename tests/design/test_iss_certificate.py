@@ -327,6 +327,7 @@ def test_a_certificate_carries_the_P_and_gains_it_rests_on():
     # before: nothing in a certificate said which P (and so which ISS gains) it used
     cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
     assert cert.iss is ISS and np.array_equal(cert.iss.P, GAIN.P)
+    assert not cert.iss.P.flags.writeable and cert.iss.P is not GAIN.P  # a copy the caller cannot change
     data = json.loads(cert.to_json())
     assert data["iss"]["P"] == GAIN.P.tolist() and data["iss"]["k"] == list(ISS.k)
     assert data["iss"]["c_v"] == 0.1 and data["iss"]["c"] == [0.1, 0.1]
