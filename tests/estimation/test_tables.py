@@ -154,6 +154,9 @@ def test_summary_reuses_the_metrics(arm):
     for i in range(2):
         np.testing.assert_array_equal(df[f"transmissions_{i}"], counts[:, i])
         np.testing.assert_array_equal(df[f"min_inter_event_time_{i}"], gaps[:, i])
+    for b in range(2):  # and from the log itself
+        for i in range(2):
+            assert df.loc[b, f"min_inter_event_time_{i}"] == np.diff(arm.transmission_times(b, i)).min()
     np.testing.assert_array_equal(df["max_error"], max_estimation_error(arm, (0.0, 5.0)))
     last = np.array([a.x[-1] for a in arm.solution.arcs])  # the arcs' last states, psi = z[:n_x]
     np.testing.assert_allclose(df["final_error"], np.linalg.norm(last[:, :4] - last[:, 4:8], axis=1))

@@ -86,13 +86,17 @@ def min_inter_event_time(result: EstimationResult, *, nodes: str = "outputs") ->
 
     """
     first, count = _node_range(result, nodes)
-    out = np.full((result.n_runs, count), np.nan)
     log = result.transmissions
-    for b in range(result.n_runs):
-        for i in range(count):
-            d = np.diff(log.t[(log.run == b) & (log.rule == first + i)])
-            if d.size:
-                out[b, i] = d.min()
+    keep = (log.rule >= first) & (log.rule < first + count)
+    run, node, t = log.run[keep], log.rule[keep] - first, log.t[keep]
+    # one pass over the log (a loop over runs and nodes was quadratic in the batch):
+    # group each node's transmissions in time order, and take the gaps within a group
+    order = np.lexsort((t, node, run))
+    run, node, t = run[order], node[order], t[order]
+    same = (run[1:] == run[:-1]) & (node[1:] == node[:-1])
+    out = np.full((result.n_runs, count), np.inf)
+    np.minimum.at(out, (run[1:][same], node[1:][same]), np.diff(t)[same])
+    out[np.isinf(out)] = np.nan  # fewer than two transmissions
     return out
 
 
