@@ -1,5 +1,6 @@
 """Plants from python-control systems (etobs.model.python_control)."""
 
+import json
 import re
 import subprocess
 import sys
@@ -311,3 +312,25 @@ def test_systems_known_not_to_compile_run_on_the_reference_under_auto_and_say_wh
         assert "so the scipy reference runs it" in res.backend_reason
         with pytest.raises(InputError, match=f"backend='engine': {why}.*use backend='scipy'"):
             simulate(pb, X0[0], 1.0, backend="engine")
+
+
+def test_a_plant_sent_by_value_to_another_process_compiles_there():
+    # dask sends functions with cloudpickle; the worker never called python_control_plant,
+    # so numba there learns the params dict when the plant's functions are unpickled
+    cloudpickle = pytest.importorskip("cloudpickle", reason="cloudpickle (the dask extra) is not installed")
+    from pathlib import Path
+
+    pb = _problem(python_control_plant(_vdp(), disturbances=["d"]), _vdp_observer(), VDP_NODES, (0.1,))
+    here = str(Path(__file__).parent)
+    code = (
+        f"import sys, json, cloudpickle; sys.path.insert(0, {here!r}); from etobs import simulate; "
+        "pb = cloudpickle.loads(sys.stdin.buffer.read()); r = simulate(pb, [1.0, 0.0], 10.0); "
+        "print(json.dumps([r.backend, r.transmissions.t.tolist()]))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], input=cloudpickle.dumps(pb), capture_output=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr.decode()[-2000:]
+    backend, times = json.loads(out.stdout.decode().strip().splitlines()[-1])
+    assert backend == "engine"
+    np.testing.assert_array_equal(times, simulate(pb, [1.0, 0.0], 10.0).transmissions.t)

@@ -273,6 +273,11 @@ class _ParamsDict:
         # the compile cache's key reads this (etobs.compile.fingerprint): no address in it
         return "etobs.model.python_control.params_dict"
 
+    def __reduce__(self) -> tuple[Callable[[], _ParamsDict], tuple[()]]:
+        # a plant's functions sent to another process by value (cloudpickle, as dask does)
+        # carry this object: numba there must know it before it compiles them
+        return _registered_params_dict, ()
+
 
 params_dict = _ParamsDict()
 _REGISTERED: list[bool] = []
@@ -304,6 +309,12 @@ def _register_params_dict() -> None:
         return filled
 
     _REGISTERED.append(True)
+
+
+def _registered_params_dict() -> _ParamsDict:
+    """:data:`params_dict`, taught to numba (how it is unpickled)."""
+    _register_params_dict()
+    return params_dict
 
 
 _NO_PARAMS = np.zeros(0)
