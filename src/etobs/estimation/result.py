@@ -230,9 +230,13 @@ class EstimationResult:
 
         Examples
         --------
+        >>> from etobs import simulate
         >>> from etobs.examples import robot_arm
-        >>> res = simulate(robot_arm(), [3, 2, 3, -2], 1.0)  # doctest: +SKIP
-        >>> res.to_pandas("transmissions").groupby("node").size()  # doctest: +SKIP
+        >>> res = simulate(robot_arm(), [3, 2, 3, -2], 5.0)
+        >>> res.to_pandas("transmissions").columns.tolist()
+        ['run', 'node', 'node_name', 'kind', 't', 'j', 'sent_y0', 'sent_y1']
+        >>> res.to_pandas("summary").loc[0, "status"]
+        'completed'
 
         """
         from etobs.estimation.tables import to_pandas
