@@ -203,7 +203,7 @@ def _nonlinear_plant(
 
 def _python_only(sys: Any) -> str:
     """Why numba cannot compile the system's functions, known from their kind alone (``""``: it may)."""
-    if type(sys).__name__ == "InterconnectedSystem":
+    if isinstance(sys, _control().InterconnectedSystem):
         return (
             "is a python-control InterconnectedSystem, whose update runs python-control's own Python "
             "code, which numba cannot compile"
