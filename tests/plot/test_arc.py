@@ -88,6 +88,20 @@ def test_default_is_the_estimation_error_on_a_log_axis(arcs_only):
     assert ax.get_yscale() == "log"
 
 
+@pytest.mark.parametrize("what", ["x", "xhat", "z", "ybar", "e", "eta"])
+def test_each_variable_is_the_arcs(arcs_only, what):
+    arc = arcs_only.arc(0)
+    _, (ax, _) = plot_hybrid_arc(arcs_only, what=what)
+    values = getattr(arc, what)
+    lines = _flows(ax)
+    assert len(lines) == values.shape[1]
+    for k, line in enumerate(lines):
+        np.testing.assert_array_equal(_finite(line.get_ydata()), values[:, k])
+    assert len(ax.collections) == len(lines)  # one collection of dashed jumps per curve
+    for coll in ax.collections:
+        assert len(coll.get_segments()) == len(arcs_only.transmissions.select(run=0))
+
+
 def test_eta_names_the_nodes(arcs_only):
     arc = arcs_only.arc(0)
     _, (ax, _) = plot_hybrid_arc(arcs_only, what="eta", components=1)
