@@ -117,10 +117,9 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     chosen = _nodes(result, nodes)
     t, j, q, kept = solution_rows(result.solution, run)
     if not kept:
-        sol = result.solution
-        only = (
-            " (it kept only max |x - xhat| over its grid: SaveAt(max_distance=...))" if sol.grid_max else ""
-        )
+        only = ""
+        if result.solution.grid_max is not None:
+            only = " (it kept only max |x - xhat| over its grid: SaveAt(max_distance=...))"
         raise InputError(
             f"this result kept neither arcs nor a grid of states{only}: simulate with "
             "save=SaveAt(steps=True) (exact steps) or save=SaveAt(grid=...)"
