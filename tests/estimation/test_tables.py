@@ -79,6 +79,22 @@ def test_transmissions_table_counts_and_sent_values_match_the_arc(arm):
                 assert np.all(np.isnan(col))  # another node's output
 
 
+def test_both_solvers_log_the_values_sent():
+    """The engine and the scipy reference fill the transmissions table alike."""
+    tables = [
+        simulate(robot_arm(), [3, 2, 3, -2], 5.0, save=SaveAt(steps=False), backend=b).to_pandas(
+            "transmissions"
+        )
+        for b in ("engine", "scipy")
+    ]
+    assert len(tables[0]) == len(tables[1]) > 5
+    np.testing.assert_array_equal(tables[0]["node"], tables[1]["node"])
+    cols = ["t", "sent_y0", "sent_y1"]
+    np.testing.assert_allclose(
+        tables[0][cols], tables[1][cols], rtol=0, atol=1e-5
+    )  # event times within ~1e-7 s
+
+
 def test_the_transmission_log_is_indexable_and_names_what_it_logged(arm):
     log = arm.transmissions
     assert log.names == ("sent_y0", "sent_y1")
