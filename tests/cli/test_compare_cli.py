@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from etobs.cli.main import main
+from etobs.errors import InputError
 from etobs.experiments.compare import compare
 from etobs.experiments.compare_spec import parse_compare_spec
 from etobs.experiments.spec import SpecError
@@ -100,6 +101,20 @@ def test_markdown_table_has_a_row_per_entry_and_states_the_windows(comparison):
     assert sum(1 for ln in lines if ln.startswith("| ")) == 14
     assert "Not run: copy / lossy: the observer copy of Remark 3 is simulated as a perfect copy" in md
     assert "error = max |x - xhat| on [6, 8] s on a 0.01 s grid" in md
+
+
+def test_tidy_tables_in_python_are_the_files(comparison):
+    import pandas as pd
+
+    for name in ("runs", "aggregate"):
+        frame = comparison.to_pandas(name)
+        pd.testing.assert_frame_equal(frame, pd.read_parquet(comparison.out / f"{name}.parquet"))
+    agg = comparison.to_pandas("aggregate").set_index(["rule", "network"])
+    assert len(agg) == len(comparison.entries)  # one line per entry run (skipped pairs have none)
+    periodic = agg.loc[("periodic", "ideal")]  # period 0.05 on [0, 8] s: 160 sends at most
+    assert 150 <= periodic.transmissions_node0_mean <= 161 and periodic.transmissions_node0_std == 0
+    with pytest.raises(InputError, match=r"`table` must be one of 'runs', 'aggregate'; got 3"):
+        comparison.to_pandas(3)
 
 
 def test_trade_off_plot(comparison):

@@ -534,6 +534,9 @@ def test_parquet_twins_hold_the_csv_tables_with_their_types(tmp_path):
     for name in ("runs", "aggregate"):
         csv, parquet = pd.read_csv(tmp_path / f"{name}.csv"), pd.read_parquet(tmp_path / f"{name}.parquet")
         pd.testing.assert_frame_equal(parquet, csv, check_dtype=True)
+        pd.testing.assert_frame_equal(res.to_pandas(name), parquet, check_dtype=True)  # the same from Python
+    with pytest.raises(InputError, match=r"`table` must be one of 'runs', 'aggregate'; got 'summary'"):
+        res.to_pandas("summary")
     runs = pd.read_parquet(tmp_path / "runs.parquet")
     kinds = runs.dtypes.map(lambda d: d.kind).to_dict()
     assert {c: kinds[c] for c in ("row", "run", "transmissions_node1", "steps")} == dict.fromkeys(

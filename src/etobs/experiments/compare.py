@@ -25,7 +25,7 @@ from etobs.errors import InputError
 from etobs.experiments.compare_spec import CompareSpec
 from etobs.experiments.pipeline import experiment_folder, other_chunks, run_groups, stored
 from etobs.experiments.store import last_line
-from etobs.experiments.tables import aggregate, not_completed, run_rows, status_notes, write_table
+from etobs.experiments.tables import aggregate, not_completed, run_rows, status_notes, to_frame, write_table
 
 
 @dataclass(frozen=True)
@@ -159,6 +159,10 @@ class Comparison:
     def complete(self) -> bool:
         """Whether every run of every entry is present."""
         return not self.failures and all(len(e.runs) == self.spec.initial_states.runs for e in self.entries)
+
+    def to_pandas(self, table: str = "runs") -> Any:
+        """``"runs"`` or ``"aggregate"`` (:attr:`runs`, :attr:`aggregate`) as a ``pandas.DataFrame``."""
+        return to_frame(table, {"runs": list(self.runs), "aggregate": list(self.aggregate)})
 
     def table(self) -> list[dict[str, Any]]:
         """One row per entry: means over the runs that completed, minima of the inter-event times."""

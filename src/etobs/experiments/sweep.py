@@ -21,6 +21,7 @@ from etobs.experiments.tables import (
     not_completed,
     run_rows,
     status_notes,
+    to_frame,
     to_markdown,
     write_table,
 )
@@ -67,6 +68,17 @@ class SweepResult:
     def complete(self) -> bool:
         """Whether every run of the spec is present."""
         return len(self.runs) == self.spec.n_runs and not self.failures
+
+    def to_pandas(self, table: str = "runs") -> Any:
+        """``"runs"`` or ``"aggregate"`` as a ``pandas.DataFrame``, typed as its Parquet file.
+
+        Examples
+        --------
+        >>> frame = result.to_pandas("aggregate")  # doctest: +SKIP
+        >>> frame.filter(like="transmissions_node").filter(like="_mean")  # doctest: +SKIP
+
+        """
+        return to_frame(table, {"runs": self.runs, "aggregate": self.aggregate})
 
 
 def run_sweep(

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from etobs.errors import InputError
 from etobs.experiments.store import atomic_write
 
 #: Per-run metrics summarised by :func:`aggregate`, each also per node (``NAME_node0``...),
@@ -160,14 +161,29 @@ def to_parquet(rows: list[dict[str, Any]]) -> bytes:
     and otherwise (an integer beyond 64 bits too) the text the CSV holds; ``None`` is
     null (a column with nothing in it is a ``double`` of nulls, as a CSV reader sees it).
     """
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    header = columns(rows)
-    table = pa.table({k: _arrow_column([r.get(k) for r in rows]) for k in header})
     buf = io.BytesIO()
-    pq.write_table(table, buf)
+    pq.write_table(to_arrow(rows), buf)
     return buf.getvalue()
+
+
+def to_arrow(rows: list[dict[str, Any]]) -> Any:
+    """The rows as a ``pyarrow.Table``, typed as in :func:`to_parquet`."""
+    import pyarrow as pa
+
+    return pa.table({k: _arrow_column([r.get(k) for r in rows]) for k in columns(rows)})
+
+
+def to_frame(table: Any, tables: dict[str, list[dict[str, Any]]]) -> Any:
+    """The rows ``tables[table]`` as a ``pandas.DataFrame``, as ``pandas.read_parquet`` reads them.
+
+    ``table`` is the argument of a result's ``to_pandas``: a key of ``tables``, else an
+    error naming the choices.
+    """
+    if not isinstance(table, str) or table not in tables:
+        raise InputError(f"`table` must be one of {', '.join(map(repr, tables))}; got {table!r}")
+    return to_arrow(tables[table]).to_pandas()
 
 
 def _arrow_column(values: list[Any]) -> Any:
