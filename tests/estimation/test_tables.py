@@ -154,7 +154,7 @@ def test_transmissions_table_with_a_network_has_one_row_per_packet_sent():
     np.testing.assert_allclose(df["sent_y0"], x @ linear.C[0], rtol=1e-12, atol=1e-12)
     summary = res.to_pandas("summary")
     for key in ("lost", "overflow", "stale", "in_flight", "applied"):
-        np.testing.assert_array_equal(summary[f"{key}_0"], stats[key][:, 0])
+        np.testing.assert_array_equal(summary[f"{key}_node0"], stats[key][:, 0])
 
 
 # -- summary ----------------------------------------------------------------------------
@@ -168,16 +168,16 @@ def test_summary_reuses_the_metrics(arm):
     assert (df["backend"] == arm.backend).all()
     counts, gaps = transmission_counts(arm), min_inter_event_time(arm)
     for i in range(2):
-        np.testing.assert_array_equal(df[f"transmissions_{i}"], counts[:, i])
-        np.testing.assert_array_equal(df[f"min_inter_event_time_{i}"], gaps[:, i])
+        np.testing.assert_array_equal(df[f"transmissions_node{i}"], counts[:, i])
+        np.testing.assert_array_equal(df[f"min_inter_event_time_node{i}"], gaps[:, i])
     for b in range(2):  # and from the log itself
         for i in range(2):
-            assert df.loc[b, f"min_inter_event_time_{i}"] == np.diff(arm.transmission_times(b, i)).min()
+            assert df.loc[b, f"min_inter_event_time_node{i}"] == np.diff(arm.transmission_times(b, i)).min()
     np.testing.assert_array_equal(df["max_error"], max_estimation_error(arm, (0.0, 5.0)))
     last = np.array([a.x[-1] for a in arm.solution.arcs])  # the arcs' last states, psi = z[:n_x]
     np.testing.assert_allclose(df["final_error"], np.linalg.norm(last[:, :4] - last[:, 4:8], axis=1))
     win = arm.to_pandas("summary", window=(1.0, 2.0))
-    np.testing.assert_array_equal(win["transmissions_0"], transmission_counts(arm, (1.0, 2.0))[:, 0])
+    np.testing.assert_array_equal(win["transmissions_node0"], transmission_counts(arm, (1.0, 2.0))[:, 0])
     np.testing.assert_array_equal(win["max_error"], max_estimation_error(arm, (1.0, 2.0)))
     assert win.attrs["window"] == (1.0, 2.0) and win.attrs["max_error_grid"] == "251 points on [0, 5]"
 
@@ -185,7 +185,7 @@ def test_summary_reuses_the_metrics(arm):
 def test_summary_counts_input_nodes_after_the_outputs(with_input):
     df = with_input.to_pandas("summary")
     np.testing.assert_array_equal(
-        df[["transmissions_0", "transmissions_1"]].to_numpy(), transmission_counts(with_input, nodes="all")
+        df[["transmissions_node0", "transmissions_node1"]].to_numpy(), transmission_counts(with_input, nodes="all")
     )
     assert df.attrs["node_kinds"] == ["output", "input"]
 

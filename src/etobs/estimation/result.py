@@ -182,12 +182,12 @@ class EstimationResult:
             ``"summary"`` (default): one row per run. Columns ``run``, ``status``
             (categorical: ``completed``, ``zeno``, ...), ``message`` (how it ended, and
             the fix), ``backend``, ``t_final``, ``j_final``, ``n_steps``;
-            ``transmissions_<i>`` (node ``i``'s transmissions in ``window``, as
+            ``transmissions_node<i>`` (node ``i``'s transmissions in ``window``, as
             :func:`~etobs.estimation.transmission_counts` with ``nodes="all"``);
-            ``min_inter_event_time_<i>`` (over the whole run, NaN below two
+            ``min_inter_event_time_node<i>`` (over the whole run, NaN below two
             transmissions, as :func:`~etobs.estimation.min_inter_event_time`); with a
-            network ``lost_<i>``, ``overflow_<i>``, ``stale_<i>``, ``in_flight_<i>``,
-            ``applied_<i>`` (as :meth:`network_stats`); ``final_error``
+            network ``lost_node<i>``, ``overflow_node<i>``, ``stale_node<i>``, ``in_flight_node<i>``,
+            ``applied_node<i>`` (as :meth:`network_stats`); ``final_error``
             (``|x - xhat|`` where the run stopped); and, when a grid was kept,
             ``max_error`` (``max |x - xhat|`` over the grid points in ``window``, as
             :func:`~etobs.estimation.max_estimation_error`; ``attrs["max_error_grid"]``

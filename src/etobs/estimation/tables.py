@@ -111,14 +111,14 @@ def summary(result: EstimationResult, window: Any = None) -> pd.DataFrame:
     counts = transmission_counts(result, (lo, hi), nodes="all")
     gaps = min_inter_event_time(result, nodes="all")
     for i in range(C):
-        cols[f"transmissions_{i}"] = counts[:, i]
+        cols[f"transmissions_node{i}"] = counts[:, i]
     for i in range(C):
-        cols[f"min_inter_event_time_{i}"] = gaps[:, i]
+        cols[f"min_inter_event_time_node{i}"] = gaps[:, i]
     if pb.network is not None:
         for key, arr in result.network_stats().items():
             if key != "sent":  # the sent packets are the transmissions (over the whole run)
                 for i in range(C):
-                    cols[f"{key}_{i}"] = arr[:, i]
+                    cols[f"{key}_node{i}"] = arr[:, i]
     q = sol.x_final
     with np.errstate(invalid="ignore", over="ignore"):
         cols["final_error"] = np.linalg.norm(q[:, pb.layout.x] - pb.psi(q[:, pb.layout.z]), axis=-1)
