@@ -15,6 +15,15 @@ from typing import Any
 DELAY = 1.0
 
 
+def progress_shown(enabled: bool | None) -> bool:
+    """Whether a bar asked for with ``enabled`` is shown (``None``: stderr is a terminal).
+
+    Callers that would pay for a bar (tqdm's import, a solver reporting in chunks) ask
+    this first and skip the bar when it is ``False``.
+    """
+    return sys.stderr.isatty() if enabled is None else bool(enabled)
+
+
 def progress_bar(
     total: int, desc: str, *, enabled: bool | None = None, unit: str = "run", initial: int = 0
 ) -> Any:
@@ -50,7 +59,7 @@ def progress_bar(
     """
     from tqdm import tqdm
 
-    show = sys.stderr.isatty() if enabled is None else bool(enabled)
+    show = progress_shown(enabled)
     return tqdm(
         total=total,
         desc=desc,

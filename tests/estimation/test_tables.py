@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from etobs import DynamicRule, Linear, Link, Network, PeriodicRule, Quadratic, SaveAt, simulate
-from etobs.errors import InputError
+from etobs.errors import InputError, InputTypeError
 from etobs.estimation import (
     max_estimation_error,
     min_inter_event_time,
@@ -115,6 +115,19 @@ def test_transmissions_table_window_and_node_numbering(arm):
     assert full.attrs["node_names"] == ["sensor 1", "sensor 2"]  # node 0 is the paper's sensor 1
 
 
+def test_transmissions_table_of_nodes_sharing_a_name():
+    # a name is a label, not a key: two nodes named alike (or a name equal to another
+    # node's default) once crashed the table with pandas' "categories must be unique"
+    from dataclasses import replace
+
+    pb = robot_arm()
+    pb = replace(pb, nodes=[replace(n, name="s") for n in pb.nodes])
+    res = simulate(pb, [3, 2, 3, -2], 5.0)
+    df = res.to_pandas("transmissions")
+    assert list(df["node_name"].cat.categories) == ["s"]
+    assert (df["node_name"] == "s").all() and set(df["node"]) == {0, 1}
+
+
 def test_transmissions_table_of_an_input_node_holds_u(with_input):
     res = with_input
     df = res.to_pandas("transmissions")
@@ -185,7 +198,8 @@ def test_summary_reuses_the_metrics(arm):
 def test_summary_counts_input_nodes_after_the_outputs(with_input):
     df = with_input.to_pandas("summary")
     np.testing.assert_array_equal(
-        df[["transmissions_node0", "transmissions_node1"]].to_numpy(), transmission_counts(with_input, nodes="all")
+        df[["transmissions_node0", "transmissions_node1"]].to_numpy(),
+        transmission_counts(with_input, nodes="all"),
     )
     assert df.attrs["node_kinds"] == ["output", "input"]
 
@@ -237,6 +251,10 @@ def test_to_pandas_refuses_what_it_cannot_give(arm):
         arm.to_pandas("summary", variables=["x"])
     with pytest.raises(InputError, match=r"`variables` must be names from .*'y' unknown"):
         arm.to_pandas("grid", variables=["x", "y"])
+    with pytest.raises(
+        InputTypeError, match=r"`variables` must be a name or a list of names from .*; got int"
+    ):
+        arm.to_pandas("grid", variables=3)
     with pytest.raises(InputError, match=r"`variables` must be names from .*got \[\]"):
         arm.to_pandas("grid", variables=[])
     with pytest.raises(InputError, match=r"`window` must satisfy t_start <= t_stop"):

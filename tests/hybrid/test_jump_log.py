@@ -209,6 +209,16 @@ def test_to_pandas_and_to_dict(log):
     assert np.asarray(log.t).shape == (5,) and np.asarray(log.x).shape == (5, 1)
 
 
+def test_names_without_values_are_refused():
+    # the values would have been uninitialised memory (6.9e-310 seen)
+    one = np.zeros(1, dtype=np.int64)
+    with pytest.raises(
+        InputError, match=r"JumpLog `names` \['a'\] given without `x`: give the logged values too"
+    ):
+        JumpLog(one, one, np.zeros(1), one, names=("a",))
+    assert JumpLog(one, one, np.zeros(1), one).x.shape == (1, 0)
+
+
 @pytest.mark.parametrize(
     ("names", "error", "match"),
     [
@@ -216,6 +226,7 @@ def test_to_pandas_and_to_dict(log):
         (["t"], InputError, r"`names` must be distinct strings other than run, rule, t, j; got \['t'\]"),
         ([3], InputError, r"`names` must be distinct strings.*got \[3\]"),
         ("v", InputTypeError, r"`names` must be a sequence of column names; got the string 'v'"),
+        (5, InputTypeError, r"`names` must be a sequence of column names; got int"),
     ],
 )
 def test_bad_column_names_are_refused(log, names, error, match):
@@ -296,6 +307,16 @@ def test_engine_progress_reports_every_run_once_and_changes_no_number(parallel, 
     alone = solve_compiled(ball, _batch(B)[-1], (0.0, 1.5), **kw)
     np.testing.assert_array_equal(alone.jumps.x, reported.jumps.select(run=B - 1).x)
     np.testing.assert_array_equal(alone.x_final[0], reported.x_final[-1])
+
+
+def test_engine_progress_comes_in_at_most_max_chunks(monkeypatch):
+    # each chunk waits for its slowest run: a large batch is cut in at most MAX_CHUNKS
+    ball = logged_ball((1,)).compiled()
+    monkeypatch.setattr(comp, "MAX_CHUNKS", 2)
+    B = 4 * comp.CHUNK_PER_THREAD * comp._threads() + 1
+    calls = []
+    solve_compiled(ball, _batch(B), (0.0, 0.5), params=[RESTITUTION, G], progress=calls.append)
+    assert calls == [-(-B // 2), B - -(-B // 2)]
 
 
 def test_progress_through_the_front_door_on_both_backends():

@@ -166,7 +166,7 @@ def test_noise_and_an_input_node():
     result = simulate(pb, x0=X0[1], t_end=3.0, backend="scipy")
     arc = result.arc(0)
     _, axes = plot_held_outputs(result)
-    assert [ax.get_ylabel() for ax in axes] == ["both", "input node 0"]
+    assert [ax.get_ylabel() for ax in axes] == ["both", "input0"]
     for k in range(2):  # node 0 sends both outputs: two steps in its panel
         _, measured, _ = _line(axes[0], rf"$\tilde y_{{{k + 1}}}$")
         np.testing.assert_allclose(measured, arc.x[:, k] + noise(arc.t)[:, k], rtol=0, atol=1e-13)

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from etobs import _validate as v
-from etobs._progress import progress_bar
+from etobs._progress import progress_bar, progress_shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
-from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.options import SaveAt, SolverOptions, checked_options, checked_save
 from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solution import GridMax
 from etobs.hybrid.solver import check_backend
@@ -88,6 +89,7 @@ def simulate(
     if not isinstance(problem, EstimationProblem):
         raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
     backend, reason = choose_backend(problem, check_backend(backend))
+    options, save = checked_options(options), checked_save(save)
     p, o = problem.plant, problem.observer
     t0 = v.real("t0", t0)
     t_end = v.real("t_end", t_end)
@@ -114,9 +116,11 @@ def simulate(
         from etobs.hybrid.compiled import solve_compiled
 
         cp = compile_problem(problem)  # before the bar: it counts runs solved, not the compile
-    with progress_bar(B, "simulate", enabled=progress) as bar:
-        # no callback for a bar that is off: the engine then solves the batch in one pass
-        kw = {"options": options, "save": solver_save, "progress": None if bar.disable else bar.update}
+    # no bar, no tqdm import and no callback when it is off: the engine then solves the
+    # batch in one pass
+    bar = progress_bar(B, "simulate", enabled=progress) if progress_shown(progress) else None
+    with bar if bar is not None else contextlib.nullcontext():
+        kw = {"options": options, "save": solver_save, "progress": None if bar is None else bar.update}
         if backend == "engine":
             sol = solve_compiled(cp.system, q0, (t0, t_end), params=cp.params, **kw)
         else:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from etobs.errors import InputError
+from etobs.errors import InputError, InputTypeError
 from etobs.estimation.metrics import (
     _window,
     max_estimation_error,
@@ -74,6 +74,11 @@ def to_pandas(
 def _variables(variables: Any) -> tuple[str, ...]:
     if variables is None:
         return tuple(VARIABLES)
+    if not isinstance(variables, str | list | tuple):
+        raise InputTypeError(
+            f"`variables` must be a name or a list of names from {tuple(VARIABLES)}; "
+            f"got {type(variables).__name__}"
+        )
     names = (variables,) if isinstance(variables, str) else tuple(variables)
     bad = [n for n in names if n not in VARIABLES]
     if bad or not names:
@@ -157,7 +162,10 @@ def transmissions(result: EstimationResult, window: Any = None) -> pd.DataFrame:
         {
             "run": log.run[keep].astype(np.int64),
             "node": node,
-            "node_name": pd.Categorical.from_codes(node, categories=names),
+            # two nodes may share a name: the categories are the distinct names
+            "node_name": pd.Categorical(
+                np.asarray(names, dtype=object)[node], categories=list(dict.fromkeys(names))
+            ),
             "kind": pd.Categorical.from_codes(
                 (np.asarray(kinds)[node] == "input").astype(np.int8), categories=["output", "input"]
             ),

@@ -115,7 +115,9 @@ class JumpLog:
                     f"JumpLog `{key}` must have shape ({L},) like `run`; got {np.shape(getattr(self, key))}"
                 )
         names = tuple(self.names)
-        x = np.empty((L, len(names))) if self.x is None else np.asarray(self.x, dtype=float)
+        if self.x is None and names:  # names without values would label uninitialised memory
+            raise InputError(f"JumpLog `names` {list(names)} given without `x`: give the logged values too")
+        x = np.empty((L, 0)) if self.x is None else np.asarray(self.x, dtype=float)
         if not names and x.ndim == 2:
             names = log_names(range(x.shape[1]))
         if x.shape != (L, len(names)):
@@ -224,6 +226,8 @@ class JumpLog:
             return self.names
         if isinstance(names, str):
             raise InputTypeError(f"`names` must be a sequence of column names; got the string {names!r}")
+        if not isinstance(names, Sequence):
+            raise InputTypeError(f"`names` must be a sequence of column names; got {type(names).__name__}")
         out = tuple(names)
         if len(out) != len(self.names):
             raise InputError(
@@ -383,7 +387,7 @@ class HybridSolution:
         """One sentence per run saying how it ended and, on failure, how to fix it."""
         details = self.failures or ("",) * self.n_runs
         return [
-            status_message(Status(s), float(t), d)
+            status_message(Status(s), float(t), d, self.backend)
             for s, t, d in zip(self.status, self.t_final, details, strict=True)
         ]
 

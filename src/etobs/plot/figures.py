@@ -37,12 +37,8 @@ def _run(n_runs: int, run: Any) -> int:
 
 
 def _node_name(result: EstimationResult, node: int) -> str:
-    """How figures name node ``node`` (output nodes, then input nodes, as in ``transmissions``)."""
-    pb = result.problem
-    if node < pb.n_nodes:
-        return pb.nodes[node].name or f"node {node}"
-    k = node - pb.n_nodes
-    return pb.input_nodes[k].name or f"input node {k}"
+    """How figures name node ``node``: as the tables, reprs and sweeps do (``channel_names``)."""
+    return result.problem.channel_names[node]
 
 
 def _trajectory(result: EstimationResult, run: int) -> Trajectory:
