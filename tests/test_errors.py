@@ -25,7 +25,7 @@ from etobs import (
 from etobs import _validate as v
 from etobs.estimation import transmission_counts
 from etobs.examples import robot_arm
-from etobs.hybrid import HybridSystem, solve, solve_reference
+from etobs.hybrid import HybridSystem, solve, solve_reference, status_message
 
 
 @pytest.mark.parametrize(
@@ -135,6 +135,29 @@ def _node():
         ),
         (lambda: solve("system", [0.0], (0, 1)), InputTypeError, r"`system` must be a HybridSystem; got str"),
         (
+            lambda: solve(
+                HybridSystem(1, 0, lambda t, x: x, lambda t, x: x, lambda k, t, x: x),
+                [0.0],
+                (0, 1),
+                save=[0.5, 1.0],
+            ),
+            InputTypeError,
+            r"`save` must be a SaveAt or None; the states on a time grid are save=SaveAt\(grid=times\); "
+            r"got list \[0.5, 1.0\]",
+        ),
+        (
+            lambda: solve(
+                HybridSystem(1, 0, lambda t, x: x, lambda t, x: x, lambda k, t, x: x),
+                [0.0],
+                (0, 1),
+                backend="scipy",
+                options={"max_jumps": 3},
+            ),
+            InputTypeError,
+            r"`options` must be a SolverOptions.*got dict \{'max_jumps': 3\} \(a dict of settings is "
+            r"SolverOptions\(\*\*settings\)\)",
+        ),
+        (
             lambda: solve_reference("system", [0.0], (0, 1)),
             InputTypeError,
             r"`system` must be a HybridSystem; got str",
@@ -208,6 +231,12 @@ def test_power_and_custom_with_inverse():
 
 def test_status_labels_and_messages():
     assert Status.MAX_JUMPS.label == "max_jumps" and not Status.MAX_JUMPS.ok and Status.COMPLETED.ok
+    # every status has a sentence on both solvers; the reference's model_error does not send
+    # the user to the reference
+    for s in Status:
+        assert status_message(s) and status_message(s, backend="scipy")
+    assert "backend='scipy'" in status_message(Status.MODEL_ERROR, backend="engine")
+    assert "backend='scipy'" not in status_message(Status.MODEL_ERROR, backend="scipy")
     res = simulate(robot_arm(), [[3, 2, 3, -2]] * 2, 0.5, options=SolverOptions(max_steps=3))
     assert res.status_labels() == ["max_steps", "max_steps"]
     assert not res.ok

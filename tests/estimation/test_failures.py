@@ -124,6 +124,13 @@ def test_a_wrong_length_late_in_a_run_ends_it_naming_f_p(backend):
     assert res.status_labels() == ["model_error"]
     assert res.solution.t_final[0] <= 0.5
     assert "`f_p` returned" in res.messages()[0]
+    # the reference ran the Python function: it must not send the user to itself
+    assert ("run the same problem with backend='scipy'" in res.messages()[0]) == (backend == "engine")
+    if backend == "scipy":
+        assert (
+            "`f_p` returned shape (2,); expected (1,) for one run; a model function failed on this run's "
+            in (res.messages()[0])
+        )
 
 
 def _scalar_late(t, x, u, v):

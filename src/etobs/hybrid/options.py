@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.errors import InputError
+from etobs.errors import InputError, InputTypeError
 
 METHODS = ("dop853", "dopri5")
 _INT_LIMIT = 2**62
@@ -158,6 +158,43 @@ class SaveAt:
         if pairs.min() < 0 or pairs.max() >= n:
             raise InputError(f"`max_distance` indices must lie in 0 .. {n - 1} (the state size); got {d!r}")
         return pairs
+
+
+def checked_options(options: Any) -> SolverOptions:
+    """``options`` of a solve: a :class:`SolverOptions`, or ``None`` for the defaults.
+
+    Raises
+    ------
+    InputTypeError
+        Anything else (a dict of settings, say), naming ``options`` and the way to write it.
+
+    """
+    if options is None:
+        return SolverOptions()
+    if not isinstance(options, SolverOptions):
+        hint = " (a dict of settings is SolverOptions(**settings))" if isinstance(options, dict) else ""
+        raise InputTypeError(
+            "`options` must be a SolverOptions, e.g. options=SolverOptions(rtol=1e-8), or None; "
+            f"got {type(options).__name__} {v.shown(options)}{hint}"
+        )
+    return options
+
+
+def checked_save(save: Any) -> SaveAt | None:
+    """``save`` of a solve: a :class:`SaveAt`, or ``None`` for the full arcs.
+
+    Raises
+    ------
+    InputTypeError
+        Anything else (an array of times, say), naming ``save`` and the way to write it.
+
+    """
+    if save is not None and not isinstance(save, SaveAt):
+        raise InputTypeError(
+            "`save` must be a SaveAt or None; the states on a time grid are save=SaveAt(grid=times); "
+            f"got {type(save).__name__} {v.shown(save)}"
+        )
+    return save
 
 
 def _ints(a: np.ndarray) -> bool:

@@ -40,7 +40,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
-from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.options import SaveAt, SolverOptions, checked_options, checked_save
 from etobs.hybrid.solution import HybridSolution
 from etobs.hybrid.system import BatchedSystem, HybridSystem
 
@@ -159,6 +159,7 @@ def solve(
 
     """
     backend = check_backend(backend)
+    options, save = checked_options(options), checked_save(save)
     if isinstance(system, HybridSystem) and backend != "scipy":
         from etobs.hybrid.compiled import solve_compiled
 

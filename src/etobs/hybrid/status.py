@@ -66,13 +66,26 @@ _MESSAGES = {
     ),
 }
 
+#: The reference runs the Python functions as they are and its failure detail holds their
+#: exception: it must not send the user to itself.
+_REFERENCE_MESSAGES = {
+    Status.MODEL_ERROR: (
+        "a model function failed on this run's values (the reference ran it as written: the "
+        "exception or the shape is the one Python gave); call it on the run's last state to "
+        "reproduce it"
+    ),
+}
 
-def status_message(status: Status, t: float | None = None, detail: str = "") -> str:
+
+def status_message(status: Status, t: float | None = None, detail: str = "", backend: str = "") -> str:
     """Return a sentence describing ``status`` (with the stopping time when given).
 
-    ``detail`` (e.g. which function failed) is put before the general explanation.
+    ``detail`` (e.g. which function failed) is put before the general explanation;
+    ``backend`` is the solver that ran (``"scipy"``'s advice differs from the engine's).
     """
     text = _MESSAGES[Status(status)]
+    if backend == "scipy":
+        text = _REFERENCE_MESSAGES.get(Status(status), text)
     if detail:
         text = f"{detail}; {text}"
     if t is not None and status != Status.COMPLETED:
