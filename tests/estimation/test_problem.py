@@ -13,6 +13,9 @@ from etobs import (
     Plant,
     Quadratic,
     SaveAt,
+    linear_luenberger,
+    linear_plant,
+    luenberger,
     simulate,
 )
 from etobs.estimation import max_estimation_error, min_inter_event_time, transmission_counts
@@ -87,6 +90,74 @@ def test_a_function_written_for_a_batch_is_rejected_with_a_hint():
         EstimationProblem(batched, observer(), [Node((0, 1, 2), rule())])
 
 
+def test_a_gain_L_of_another_size_than_the_plant_is_refused_naming_L():
+    # before: ValueError "matmul: Input operand 1 has a mismatch..." raised inside etobs
+    one_output = Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x[:1], n_x=2, n_y=1)
+    with pytest.raises(
+        InputError,
+        match=r"the observer's gain `L` has shape \(2, 2\); expected \(n_x, n_y\) = \(2, 1\) for this "
+        r"plant \(one row per state, one column per output\)$",
+    ):
+        EstimationProblem(
+            one_output, luenberger(lambda t, x, u: -x, L=[[1.0, 0.0], [1.0, 0.0]]), [Node((0,), rule())]
+        )
+    # before: "observer `n_z` = 1 is smaller than the plant's n_x = 2", without a word of L
+    with pytest.raises(
+        InputError, match=r"`L` has shape \(1, 2\); expected .* = \(2, 1\) .*: is L transposed\?"
+    ):
+        EstimationProblem(one_output, luenberger(lambda t, x, u: -x, L=[[1.0, 1.0]]), [Node((0,), rule())])
+    a = -np.eye(4)
+    two_outputs = linear_plant(a, C=np.eye(4)[:2])
+    with pytest.raises(InputError, match=r"`L` has shape \(4, 3\); expected \(n_x, n_y\) = \(4, 2\)"):
+        EstimationProblem(two_outputs, linear_luenberger(a, np.ones((4, 3))), [Node((0, 1), rule())])
+    # the same gain on the right plant is accepted
+    EstimationProblem(two_outputs, linear_luenberger(a, np.ones((4, 2))), [Node((0, 1), rule())])
+
+
+def test_a_function_that_raises_at_construction_is_a_model_error_naming_it_and_the_call():
+    # before: the user's raw IndexError, from the shape check at construction
+    uses_v = Plant(f_p=lambda t, x, u, v: -x + v[0], h=lambda x: x[:1], n_x=2, n_y=1)
+    with pytest.raises(
+        ModelError,
+        match=r"^`f_p` raised IndexError: index 0 is out of bounds for axis 0 with size 0; etobs called it "
+        r"once at construction, to check its output's shape, as f_p\(t=0.0, x of shape \(2,\), u of shape "
+        r"\(0,\), v of shape \(0,\)\)\. u and v are empty \(the plant's n_u, n_v = 0\): if `f_p` reads "
+        r"one of them, give the Plant its size \(n_u=..., n_v=...\)$",
+    ) as info:
+        EstimationProblem(uses_v, observer(2), [Node((0,), rule())])
+    assert isinstance(info.value.__cause__, IndexError)
+    # an index past x: the message has no hint on n_u, n_v; params are shown when there are any
+    past_x = Plant(f_p=lambda t, x, u, v, p: x[2] * p, h=lambda x, p: x[:1], n_x=2, n_y=1, params=[1.0])
+    with pytest.raises(
+        ModelError,
+        match=r"`f_p` raised IndexError: index 2 is out of bounds .* as f_p\(t=0.0, x of shape \(2,\), "
+        r"u of shape \(0,\), v of shape \(0,\), p of shape \(1,\)\)$",
+    ):
+        EstimationProblem(past_x, observer(2), [Node((0,), rule())])
+    # an observer of one's own that multiplies ybar by a gain of the wrong size
+    gain = np.ones((2, 2))
+    bad_o = Observer(f_o=lambda t, z, u, ybar, yhat: -z + gain @ (ybar - yhat), n_z=2)
+    with pytest.raises(
+        ModelError,
+        match=r"^`f_o` raised ValueError: matmul.* as f_o\(t=0.0, z of shape \(2,\), u of shape \(0,\), "
+        r"ybar of shape \(1,\), yhat of shape \(1,\)\)$",
+    ):
+        EstimationProblem(plant(2, 1), bad_o, [Node((0,), rule())])
+
+
+def test_nodes_must_be_a_list_even_for_one_node():
+    # before: TypeError: 'Node' object is not iterable
+    with pytest.raises(
+        InputTypeError,
+        match=r"`nodes` must be a list or tuple of Node objects \(one Node is nodes=\[Node\(...\)\]\); got Node",
+    ):
+        EstimationProblem(plant(), observer(), Node((0, 1, 2), rule()))
+    with pytest.raises(
+        InputTypeError, match=r"`nodes` must be a non-empty sequence of Node objects; got \['int'\]"
+    ):
+        EstimationProblem(plant(), observer(), [0])
+
+
 def test_other_problem_errors():
     with pytest.raises(InputError, match=r"observer `n_z` = 2 is smaller than the plant's n_x = 3"):
         EstimationProblem(plant(), observer(2), [Node((0, 1, 2), rule())])
@@ -117,6 +188,18 @@ def test_other_problem_errors():
             r"`backend` must be one of \('auto', 'engine', 'scipy'\) \(or 'numba' for 'engine'\); got 'rk4'",
         ),
         ({"e0": [0.0]}, InputError, r"`e0` has shape \(1,\); expected \(2,\)"),
+        (  # before: AttributeError: 'numpy.ndarray' object has no attribute 'max_distance'
+            {"save": np.linspace(0.0, 0.1, 3)},
+            InputTypeError,
+            r"`save` must be a SaveAt or None; the states on a time grid are save=SaveAt\(grid=times\); "
+            r"got ndarray \[0.0, 0.05, 0.1\]",
+        ),
+        (  # before: AttributeError: 'dict' object has no attribute 'rtol'
+            {"options": {"rtol": 1e-6}},
+            InputTypeError,
+            r"`options` must be a SolverOptions, e.g. options=SolverOptions\(rtol=1e-8\), or None; got dict "
+            r"\{'rtol': 1e-06\} \(a dict of settings is SolverOptions\(\*\*settings\)\)",
+        ),
     ],
 )
 def test_bad_simulate_arguments(kwargs, exc, match):

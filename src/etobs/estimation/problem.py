@@ -113,15 +113,18 @@ class EstimationProblem:
             raise InputTypeError(f"`plant` must be a Plant; got {type(self.plant).__name__}")
         if not isinstance(self.observer, Observer):
             raise InputTypeError(f"`observer` must be an Observer; got {type(self.observer).__name__}")
+        if isinstance(self.nodes, Node) or not isinstance(self.nodes, tuple | list):
+            raise InputTypeError(
+                "`nodes` must be a list or tuple of Node objects (one Node is nodes=[Node(...)]); "
+                f"got {type(self.nodes).__name__}"
+            )
         nodes = tuple(self.nodes)
         if not nodes or not all(isinstance(nd, Node) for nd in nodes):
-            raise InputTypeError("`nodes` must be a non-empty sequence of Node objects")
+            got = [type(nd).__name__ for nd in nodes]
+            raise InputTypeError(f"`nodes` must be a non-empty sequence of Node objects; got {got}")
         object.__setattr__(self, "nodes", nodes)
         p = self.plant
-        if self.observer.n_z < p.n_x:
-            raise InputError(
-                f"observer `n_z` = {self.observer.n_z} is smaller than the plant's n_x = {p.n_x}"
-            )
+        _check_observer_size(self.observer, p)
         _check_partition(nodes, p.n_y)
         if isinstance(self.input_nodes, InputNode) or not isinstance(self.input_nodes, tuple | list):
             raise InputTypeError(
@@ -273,6 +276,25 @@ class EstimationProblem:
         return build_system(self, self.calls(False))
 
 
+def _check_observer_size(obs: Observer, plant: Plant) -> None:
+    """Refuse an observer smaller than the plant, or whose gain ``L`` has another number of outputs.
+
+    The first place ``n_y`` and the observer meet: ``L`` (``gain_shape``) must be
+    ``(n_x, n_y)``; a transposed ``L`` shows as an ``n_z`` below ``n_x``, so the message
+    names ``L`` then.
+    """
+    expected = f"expected (n_x, n_y) = ({plant.n_x}, {plant.n_y}) for this plant"
+    gain = obs.gain_shape
+    if gain is not None and (gain[0] != plant.n_x or gain[1] != plant.n_y):
+        hint = ": is L transposed?" if gain == (plant.n_y, plant.n_x) else ""
+        raise InputError(
+            f"the observer's gain `L` has shape {gain}; {expected} (one row per state, one column "
+            f"per output){hint}"
+        )
+    if obs.n_z < plant.n_x:
+        raise InputError(f"observer `n_z` = {obs.n_z} is smaller than the plant's n_x = {plant.n_x}")
+
+
 def _check_partition(nodes: tuple[Node, ...], n_y: int) -> None:
     owner: dict[int, list[int]] = {}
     for i, nd in enumerate(nodes):
@@ -386,13 +408,14 @@ def _check_shapes(pb: EstimationProblem) -> None:
     x, z = read_only(np.zeros(p.n_x)), read_only(np.zeros(o.n_z))
     u, v = read_only(pb.u(t0)[0]), read_only(pb.v(t0)[0])
 
-    def call(name: str, fn: Any, *args: Any) -> Any:
+    def call(name: str, fn: Any, *args: Any, **shown: Any) -> Any:
+        # ``shown``: the call as the user wrote the function, for the message
         try:
             return fn(*args)
-        except ValueError as exc:
-            if "read-only" not in str(exc):
-                raise
-            raise ModelError(raised(name, exc)) from exc
+        except Exception as exc:  # the user's code may raise anything; say whose it is and on what
+            if isinstance(exc, ValueError) and "read-only" in str(exc):
+                raise ModelError(raised(name, exc)) from exc
+            raise ModelError(_probe_failed(name, exc, shown)) from exc
 
     def check(name: str, out: Any, n: int, what: str) -> np.ndarray:
         try:
@@ -408,11 +431,36 @@ def _check_shapes(pb: EstimationProblem) -> None:
             )
         return arr
 
-    check("f_p", call("f_p", p.call_f_p, 0.0, x, u, v), p.n_x, "n_x")
-    y = read_only(check("h", call("h", p.call_h, x), p.n_y, "n_y"))
-    xhat = read_only(check("psi", call("psi", o.call_psi, z, p.n_x), p.n_x, "n_x"))
-    yhat = read_only(np.asarray(call("h", p.call_h, xhat), dtype=float))
-    check("f_o", call("f_o", o.call_f_o, 0.0, z, u, y, yhat), o.n_z, "n_z")
+    pp, op = {"p": p.params} if p.params.size else {}, {"p": o.params} if o.params.size else {}
+    fp = call("f_p", p.call_f_p, 0.0, x, u, v, t=0.0, x=x, u=u, v=v, **pp)
+    check("f_p", fp, p.n_x, "n_x")
+    y = read_only(check("h", call("h", p.call_h, x, x=x, **pp), p.n_y, "n_y"))
+    xhat = read_only(check("psi", call("psi", o.call_psi, z, p.n_x, z=z, **op), p.n_x, "n_x"))
+    yhat = read_only(np.asarray(call("h", p.call_h, xhat, x=xhat, **pp), dtype=float))
+    fo = call("f_o", o.call_f_o, 0.0, z, u, y, yhat, t=0.0, z=z, u=u, ybar=y, yhat=yhat, **op)
+    check("f_o", fo, o.n_z, "n_z")
+
+
+#: The dimension of each argument of the model functions, as the messages name it.
+_DIMS = {"x": "n_x", "u": "n_u", "v": "n_v", "z": "n_z", "ybar": "n_y", "yhat": "n_y", "p": "params"}
+
+
+def _probe_failed(name: str, exc: Exception, args: dict[str, Any]) -> str:
+    """What ``_check_shapes`` says when the user's function ``name`` raised ``exc`` on ``args``."""
+    parts = [f"{k}={a!r}" if k == "t" else f"{k} of shape {np.shape(a)}" for k, a in args.items()]
+    text = (
+        f"`{name}` raised {type(exc).__name__}: {exc}; etobs called it once at construction, to check "
+        f"its output's shape, as {name}({', '.join(parts)})"
+    )
+    empty = [k for k, a in args.items() if k in ("u", "v") and np.size(a) == 0]
+    if empty and isinstance(exc, IndexError) and "size 0" in str(exc):  # numpy's words for an empty axis
+        what = " and ".join(empty) + (" are" if len(empty) > 1 else " is")
+        sizes = ", ".join(f"{_DIMS[k]}=..." for k in empty)
+        text += (
+            f". {what} empty (the plant's {', '.join(_DIMS[k] for k in empty)} = 0): if `{name}` reads "
+            f"{'one of them' if len(empty) > 1 else 'it'}, give the Plant its size ({sizes})"
+        )
+    return text
 
 
 def _check_noise(pb: EstimationProblem) -> None:

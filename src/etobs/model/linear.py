@@ -18,7 +18,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
-from etobs.model.observer import Observer
+from etobs.model.observer import Observer, with_gain
 from etobs.model.plant import Plant
 
 
@@ -137,7 +137,7 @@ def linear_luenberger(A: Any, L: Any, B: Any = None, *, name: str = "luenberger"
         return field(t, z, u, ybar - yhat, p)
 
     params = np.concatenate([a.ravel(), b.ravel(), gain.ravel()])
-    return Observer(f_o=f_o, n_z=n_x, name=name, params=params)
+    return with_gain(Observer(f_o=f_o, n_z=n_x, name=name, params=params), gain)
 
 
 def affine_field(n_x: int, n_u: int, n_v: int) -> Callable[..., np.ndarray]:
@@ -160,8 +160,17 @@ def affine_field(n_x: int, n_u: int, n_v: int) -> Callable[..., np.ndarray]:
     return f
 
 
-def check_no_feedthrough(name: str, D: np.ndarray) -> None:
+def check_no_feedthrough(
+    name: str,
+    D: np.ndarray,
+    outputs: list[str] | None = None,
+    inputs: list[str] | None = None,
+    hint: str = "",
+) -> None:
     """Refuse a nonzero feedthrough ``D``: eq. (2)'s output ``y = h(x)`` has no term in ``u``.
+
+    ``outputs`` and ``inputs`` label ``D``'s rows and columns in the message (a
+    python-control system's signal names); ``hint`` ends it.
 
     Raises
     ------
@@ -173,11 +182,14 @@ def check_no_feedthrough(name: str, D: np.ndarray) -> None:
     if nonzero.size:
         where = [tuple(int(i) for i in ij) for ij in nonzero[:4]]
         more = f" and {len(nonzero) - 4} more" if len(nonzero) > 4 else ""
+        if outputs is not None and inputs is not None:
+            pairs = ", ".join(f"output {outputs[i]!r} on input {inputs[j]!r}" for i, j in where)
+            more = f" ({pairs}{more})"
         raise InputError(
             f"`{name}` must be zero: etobs's output map is y = h(x) (eq. (2)), with no feedthrough "
             f"from the inputs; got {name} of shape {D.shape} with nonzero entries at {where}{more} "
             f"(max |{name}| = {np.abs(D).max():g}). Model the feedthrough as a state or measure "
-            "y - D u instead"
+            f"y - D u instead{hint}"
         )
 
 

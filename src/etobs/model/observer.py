@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -32,6 +32,14 @@ class Observer:
         argument (``f_o(t, z, u, ybar, yhat, p)``, ``psi(z, p)``); numbers kept here
         change without a recompile.
 
+    Attributes
+    ----------
+    gain_shape : tuple of int or None
+        Shape ``(n_x, n_y)`` of the gain ``L`` of an observer built by :func:`luenberger`
+        or :func:`~etobs.model.linear.linear_luenberger` (``None`` otherwise): its rows
+        are ``n_z`` and its columns the outputs ``f_o`` expects, so a problem with a
+        plant of another ``n_y`` or ``n_x`` is refused naming ``L``.
+
     """
 
     f_o: ObserverFn
@@ -39,6 +47,7 @@ class Observer:
     psi: Callable[..., np.ndarray] | None = None
     name: str = "observer"
     params: Any = None
+    gain_shape: tuple[int, int] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         v.function("f_o", self.f_o)
@@ -89,4 +98,10 @@ def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger"
     def f_o(t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
         return f(t, z, u) + gain @ (ybar - yhat)
 
-    return Observer(f_o=f_o, n_z=gain.shape[0], name=name)
+    return with_gain(Observer(f_o=f_o, n_z=gain.shape[0], name=name), gain)
+
+
+def with_gain(observer: Observer, gain: np.ndarray) -> Observer:
+    """``observer``, recording that ``f_o`` multiplies ``ybar - yhat`` by the gain ``L`` (``gain_shape``)."""
+    object.__setattr__(observer, "gain_shape", (int(gain.shape[0]), int(gain.shape[1])))
+    return observer
