@@ -94,8 +94,18 @@ def test_outputs_choose_and_order_y_and_a_feedthrough_on_an_unmeasured_output_is
     np.testing.assert_array_equal(plant.call_h(np.array([2.0, 3.0])), [2.0])
     swapped = python_control_plant(_oscillator(), outputs=[1, "pos"])
     np.testing.assert_allclose(swapped.call_h(np.array([2.0, 3.0])), [4.0, 2.0])
-    with pytest.raises(InputError, match=r"`D` must be zero: etobs's output map is y = h\(x\).*\[\(1, 0\)\]"):
+    with pytest.raises(
+        InputError,
+        match=r"`D` must be zero: etobs's output map is y = h\(x\).*\[\(1, 0\)\] \(output 'mix' on input "
+        r"'force'\).* or choose the outputs without feedthrough: outputs=\['pos'\]$",
+    ):
         python_control_plant(sys_d, disturbances=["wind"])
+    with pytest.raises(
+        InputError, match=r"\(output 'pos' on input 'force'.*\(every output of the system has"
+    ):
+        python_control_plant(
+            ct.ss(A, B, C, np.ones((2, 2)), inputs=["force", "wind"], outputs=["pos", "mix"])
+        )
 
 
 def test_a_plant_passed_a_python_control_system_as_a_function_says_what_to_use():
@@ -120,8 +130,24 @@ def test_a_plant_passed_a_python_control_system_as_a_function_says_what_to_use()
             _oscillator,
             {"disturbances": [2]},
             InputError,
-            r"`disturbances\[0\]` must be an integer <= 1; got 2",
+            r"`disturbances\[0\]` must be an input index in 0..1 or an input label \(the system has 2 inputs: "
+            r"\['force', 'wind'\]\); got 2",
         ),
+        (  # before: "must be an integer <= 0; got 3"
+            lambda: ct.ss(A, B[:, :1], C, 0),
+            {"disturbances": [3]},
+            InputError,
+            r"`disturbances\[0\]` must be an input index in 0..0 or an input label \(the system has 1 input: "
+            r"\['u\[0\]'\]\); got 3",
+        ),
+        (
+            lambda: ct.ss(A, np.zeros((2, 0)), C, np.zeros((2, 0))),
+            {"disturbances": [0]},
+            InputError,
+            r"`disturbances\[0\]` = 0 names an input, but the system has no inputs",
+        ),
+        (_oscillator, {"disturbances": [-1]}, InputError, r"must be an input index in 0..1 .*; got -1"),
+        (_oscillator, {"outputs": [2]}, InputError, r"`outputs\[0\]` must be an output index in 0..1"),
         (_oscillator, {"disturbances": ["wind", 1]}, InputError, r"must not name an input twice"),
         (_oscillator, {"disturbances": 1.5}, InputTypeError, r"`disturbances` must be a sequence"),
         (_oscillator, {"outputs": []}, InputError, r"`outputs` must name at least one output"),
@@ -272,7 +298,11 @@ def test_python_numba_cannot_compile_is_a_clear_engine_error_and_runs_on_the_ref
 
     plant = python_control_plant(ct.nlsys(update, vdp_output, states=2, outputs=1, name="object"))
     pb = _problem(plant, _vdp_observer(), VDP_NODES)
-    with pytest.raises(ModelError, match=r"`f_p` cannot be compiled: .*GAINS.*backend='scipy'"):
+    with pytest.raises(
+        ModelError,
+        match=r"^`f_p` \(it runs the updfcn 'update' of the python-control system 'object'\) cannot be "
+        r"compiled: .*GAINS.*backend='scipy'",
+    ):
         simulate(pb, X0[0], 1.0)
     res = simulate(pb, X0[0], 1.0, backend="scipy")
     assert res.status_labels() == ["completed"] and len(res.transmissions) > 0

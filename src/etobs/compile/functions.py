@@ -161,7 +161,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
         try:
             cf = _load_or_compile(namespace["wrapper"], cached, f"`{name}`")
         except Exception as exc:  # numba raises many types; all mean "cannot compile"
-            raise ModelError(_cannot_compile(name, exc)) from exc
+            raise ModelError(_cannot_compile(name, exc, getattr(fn, ORIGIN, ""))) from exc
         out = CompiledFunction(name, int(cf.address), cf)
         _MEMO[key] = out
         return out
@@ -294,6 +294,10 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     return out
 
 
+#: The attribute of a user function that says where its code comes from, when not written
+#: by the user as such (a python-control system's updfcn): messages name it too.
+ORIGIN = "etobs_origin"
+
 #: How both solvers word a function that writes into its (read-only) input.
 WRITES_INPUT = (
     "writes into one of its input arrays, which are read-only (a write would change the solver's "
@@ -303,13 +307,14 @@ WRITES_INPUT = (
 _READONLY_WRITE = ("readonly array", "Cannot modify readonly")
 
 
-def _cannot_compile(name: str, exc: Exception) -> str:
-    """Why the function ``name`` cannot be compiled, and the way out."""
+def _cannot_compile(name: str, exc: Exception, origin: str = "") -> str:
+    """Why the function ``name`` cannot be compiled, and the way out; ``origin`` says whose code it runs."""
     text = str(exc)
+    who = f"`{name}` ({origin})" if origin else f"`{name}`"
     if any(k in text for k in _READONLY_WRITE) and ("setitem" in text or "Cannot modify" in text):
-        return f"`{name}` {WRITES_INPUT}"
+        return f"{who} {WRITES_INPUT}"
     return (
-        f"`{name}` cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
+        f"{who} cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
         "math on 1-D arrays (returning a 1-D array), or use backend='scipy', which runs any Python"
     )
 

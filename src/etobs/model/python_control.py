@@ -29,8 +29,8 @@ compiled code ``params`` is a numba typed dict from ``str`` to ``float``. An
 ``InterconnectedSystem`` (which runs python-control's own code) or a method as ``updfcn``
 cannot be compiled, which is known from the system: ``simulate``'s ``backend="auto"`` runs
 those on the scipy reference and its ``backend_reason`` says why. Other functions numba
-cannot compile (any Python) are a ``ModelError`` naming ``f_p`` when the engine runs, as
-for any plant; ``backend="scipy"`` runs them as written.
+cannot compile (any Python) are a ``ModelError`` naming ``f_p`` (and the system's ``updfcn``
+and name) when the engine runs, as for any plant; ``backend="scipy"`` runs them as written.
 
 python-control is an optional dependency (``pip install 'etobs[control]'``), imported
 only when a system is converted.
@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.compile.functions import ORIGIN
 from etobs.errors import InputError, InputTypeError, ModelError
 from etobs.model.linear import check_no_feedthrough, linear_plant
 from etobs.model.plant import Plant
@@ -142,7 +143,13 @@ def python_control_plant(
                 f"got {params!r}"
             )
         A, B, C, D = (np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D))
-        check_no_feedthrough("D", D[list(outs), :])
+        free = [out_labels[k] for k in range(D.shape[0]) if not D[k].any()]
+        hint = (
+            f", or choose the outputs without feedthrough: outputs={free}"
+            if free
+            else " (every output of the system has feedthrough)"
+        )
+        check_no_feedthrough("D", D[list(outs), :], [out_labels[k] for k in outs], in_labels, hint)
         return linear_plant(A, B[:, list(known)], C[list(outs), :], E=B[:, list(dist)], name=name)
     return _nonlinear_plant(sys, known, dist, outs, params, name)
 
@@ -195,6 +202,11 @@ def _nonlinear_plant(
         params=values if keys else None,
     )
     _probe(sys, plant, merged, outs, n_in)
+    for fn, what in ((plant.f_p, "updfcn"), (plant.h, "outfcn")):
+        code = getattr(sys, what)
+        if code is not None:  # a compile error then names the system's function, not only etobs's wrapper
+            label = getattr(code, "__name__", type(code).__name__)
+            setattr(fn, ORIGIN, f"it runs the {what} {label!r} of the python-control system {sys.name!r}")
     why = _python_only(sys)
     if why:  # the engine cannot compile it: simulate's "auto" runs the reference and says why
         setattr(plant.f_p, PYTHON_ONLY, why)
@@ -407,7 +419,16 @@ def _indices(name: str, value: Any, labels: list[str], what: str, *, allow_empty
                 raise InputError(f"`{name}[{k}]` = {item!r} is not one of the system's {what}s {labels}")
             out.append(labels.index(item))
         else:
-            out.append(v.integer(f"{name}[{k}]", item, lower=0, upper=len(labels) - 1))
+            index = v.integer(f"{name}[{k}]", item)
+            if not labels:
+                raise InputError(f"`{name}[{k}]` = {index} names an {what}, but the system has no {what}s")
+            if not 0 <= index < len(labels):
+                plural = "s" if len(labels) > 1 else ""
+                raise InputError(
+                    f"`{name}[{k}]` must be an {what} index in 0..{len(labels) - 1} or an {what} label "
+                    f"(the system has {len(labels)} {what}{plural}: {labels}); got {index}"
+                )
+            out.append(index)
     if len(set(out)) != len(out):
         raise InputError(f"`{name}` must not name an {what} twice; got {items} (indices {out})")
     return tuple(out)
