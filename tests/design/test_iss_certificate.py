@@ -342,9 +342,15 @@ def test_a_certificate_carries_the_P_and_gains_it_rests_on():
 def test_certificate_repr_is_short_and_names_failures():
     cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
     lines = repr(cert).splitlines()
-    assert lines[0] == "Certificate: all conditions hold" and len(lines) == 3
+    assert lines[0] == "Certificate: all conditions hold" and len(lines) == 5
     assert lines[1] == "  nu = 130, a_U = 0.1719, mu = 768.5, error bound = 1.394e+04, min tau [s] = 0.06971"
     assert lines[2] == f"  rests on ISS gains from P: {GAIN.origin}"
+    # what certify assumed is in the short view too: the arm's v = 0.02 (0, 1, 0, 1) sin(0.4 t)
+    assert lines[3] == (
+        "  note: disturbance not given: the error bound is for |v| <= sup_t |v(t)| = 0.0282843, "
+        "of problem.v (Sinusoid)"
+    )
+    assert lines[4].startswith("  note: with noise:")
     html = cert._repr_html_()
     assert html.startswith("<table>") and "<td>all conditions hold</td>" in html and "&#x27;" not in html[:20]
     with pytest.warns(RuntimeWarning, match="Theorem 1 needs"):

@@ -16,6 +16,8 @@ The spec is a TOML file (or the name of a packaged one, ``robot_arm``)::
     # the report says which P it used and how it was found.
     c_v = 0.1                # split constants of the ISS gains (section 8)
     c = [0.1, 0.1]
+    # E_v = [[...]]          # optional: how v enters the plant, x' = ... + E_v v, shape (n_x, n_v);
+    # default the matrix read from the plant's f_p (the identity for the robot arm)
 
     [guarantees]             # optional
     E = [10.0, 25.0]         # bound on |dh_i/dx f_p|: a number or one per node; or
@@ -23,7 +25,8 @@ The spec is a TOML file (or the name of a packaged one, ``robot_arm``)::
     # (the largest rate seen on seeded runs from that box, times the margin: a lower
     # estimate; also t_end = 30.0, seed = 0)
     noise = [0.0, 0.01]      # bounds m_i of the measurement noise (section 7.2)
-    disturbance = 0.0283     # bound on |v| for the error bound
+    disturbance = 0.0283     # bound on |v(t)| for the error bound (default: sup |v(t)| of the
+    # system's v when it is a constant or a sinusoid); needs [observer], as a_U does
     a_U = 0.15               # rate asked of Theorem 2 (default: 0.9 x the largest admissible)
     d = [3000.0, 8000.0]     # d_i of U (default 2 d_i*)
 
@@ -54,7 +57,8 @@ from etobs.errors import InputError, InputTypeError
 from etobs.examples.registry import make_problem, resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
-_OBSERVER_KEYS = ("structure", "A", "C", "G", "H", "slopes", "L", "P", "Q", "c_v", "c")
+_OBSERVER_KEYS = ("structure", "A", "C", "G", "H", "slopes", "L", "P", "Q", "c_v", "c", "E_v")
+_GUARANTEE_KEYS = ("E", "E_estimate", "noise", "disturbance", "a_U", "d")
 
 
 def add_parser(sub: Any) -> None:
@@ -74,22 +78,25 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(params, dict):
         raise SpecError(f"`system.params` must be a table; got {shown(params)}")
     problem = make_problem(system["factory"], params, "system.params")
-    iss = None
+    iss, obs_notes = None, []
     if "observer" in top:
         with _table("observer", _OBSERVER_KEYS):
-            iss, L, p_note = _iss(top["observer"], problem)
+            iss, L, obs_notes = _iss(top["observer"], problem)
         # the simulated problem (for E_estimate) uses the certified gain when the factory takes one
         if "L" not in params and "L" in inspect.signature(resolve_factory(system["factory"])).parameters:
             problem = make_problem(system["factory"], {**params, "L": L}, "system.params with observer.L")
-    g = _keys(
-        "guarantees",
-        top.get("guarantees", {}),
-        set(),
-        {"E", "E_estimate", "noise", "disturbance", "a_U", "d"},
-    )
-    cert = _certify(problem, iss, g)  # its errors name the key (`noise`, `E`) or the problem
-    if iss is not None and p_note:
-        cert = replace(cert, notes=(*cert.notes, p_note))
+    g = _keys("guarantees", top.get("guarantees", {}), set(), set(_GUARANTEE_KEYS))
+    unused = [k for k in ("a_U", "disturbance") if k in g]
+    if iss is None and unused:  # certify would refuse them too, naming arguments, not keys
+        raise SpecError(
+            f"`guarantees.{unused[0]}` needs an `[observer]` table: a_U and disturbance serve only Theorem 2 "
+            "and the error bound, which rest on the observer's ISS gains; add `[observer]` or remove "
+            + " and ".join(f"`guarantees.{k}`" for k in unused)
+        )
+    with _table("guarantees", _GUARANTEE_KEYS, others_as_they_are=True):
+        cert = _certify(problem, iss, g)
+    if obs_notes:
+        cert = replace(cert, notes=(*cert.notes, *obs_notes))
     print(cert.to_json() if args.json else cert.format())
     if not cert.ok and not args.json:
         for c in cert.failures():
@@ -117,17 +124,18 @@ def _certify(problem: Any, iss: Any, g: dict[str, Any]) -> Any:
         a_U=_number("guarantees.a_U", g["a_U"]) if "a_U" in g else None,
         E=E,
         noise=_numbers("guarantees.noise", g["noise"]) if "noise" in g else None,
-        disturbance=_number("guarantees.disturbance", g.get("disturbance", 0.0)),
+        disturbance=_number("guarantees.disturbance", g["disturbance"]) if "disturbance" in g else None,
     )
 
 
 @contextlib.contextmanager
-def _table(key: str, names: Collection[str]) -> Iterator[None]:
+def _table(key: str, names: Collection[str], *, others_as_they_are: bool = False) -> Iterator[None]:
     """Name the spec key in an input error raised by the design functions table ``key`` feeds.
 
     The functions name their arguments: one named like a key of the table (``names``) is
     that key (quadratic_iss_gains's "`c` must have ..." is about `observer.c`); a message
-    that already names a spec key is kept; any other gets the table's name in front.
+    that already names a spec key is kept; any other gets the table's name in front, or
+    is kept as it is with ``others_as_they_are`` (certify's errors about the problem).
     """
     try:
         yield
@@ -140,16 +148,19 @@ def _table(key: str, names: Collection[str]) -> Iterator[None]:
             raise SpecError(f"`{key}.{msg[1:]}") from exc
         raise SpecError(msg if msg.startswith(f"`{key}.") else f"`{key}`: {msg}") from exc
 
+        if others_as_they_are:
+            raise
 
 def _load(name: str) -> dict[str, Any]:
     return load_toml(name, PACKAGED, "etobs.design")
 
 
-def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
-    """The ISS gains of the spec's observer, its gain ``L``, and a note on how ``P`` was found."""
+def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, list[str]]:
+    """The ISS gains of the spec's observer, its gain ``L``, notes on where ``P`` and ``E_v`` came from."""
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
 
     keys = set(_OBSERVER_KEYS)
+    from etobs.design.iss import plant_disturbance_matrix
     needed = {
         "L": "'design', 'paper' or a matrix",
         "c_v": "a number > 0",
@@ -180,7 +191,7 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
     if not isinstance(obs["L"], list) and obs["L"] not in ("design", "paper"):
         raise SpecError(f"`observer.L` must be 'design', 'paper' or a matrix; got {shown(obs['L'])}")
     P = _matrix("observer.P", obs["P"]) if "P" in obs else None
-    note = ""
+    notes: list[str] = []
     if obs["L"] == "design":
         if P is not None:
             raise SpecError(
@@ -194,7 +205,7 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
         L = paper_L if obs["L"] == "paper" else _matrix("observer.L", obs["L"])
         gain = check_gain(A, C, L, verts, P=P, Q=Q)  # with P: only re-checked, as certify's P
         if P is None:
-            note = (
+            notes.append(
                 "no observer.P given: P was found by check_gain for observer.L; the ISS gains and the "
                 "error bound depend on P, so give observer.P (e.g. the ObserverGain.P of the design that "
                 "gave L) to certify with that P (its bound may be smaller)"
@@ -204,7 +215,17 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, str]:
         raise SpecError(f"{what} fails the LMI re-check: {'; '.join(gain.notes) or 'vertex residuals >= 0'}")
     nodes = [list(nd.outputs) for nd in problem.nodes]
     c_v, c = _number("observer.c_v", obs["c_v"]), _numbers("observer.c", obs["c"])
-    return quadratic_iss_gains(gain, nodes, c_v=c_v, c=c), gain.L, note
+    plant = problem.plant
+    if "E_v" in obs:  # certify compares it with the plant's
+        E_v = v.matrix("observer.E_v", obs["E_v"], (plant.n_x, plant.n_v))
+    else:  # theta must be for the plant's disturbance input (x' = ... + E_v v), not the identity
+        E_v = plant_disturbance_matrix(plant)
+        if E_v.shape != (plant.n_x, plant.n_x) or not np.array_equal(E_v, np.eye(plant.n_x)):
+            notes.append(
+                f"no observer.E_v given: theta is for the plant's disturbance input E_v = {E_v.tolist()}, "
+                "read from f_p (x' = ... + E_v v), not for quadratic_iss_gains' default, the identity"
+            )
+    return quadratic_iss_gains(gain, nodes, c_v=c_v, c=c, E_v=E_v), gain.L, notes
 
 
 def _numbers(key: str, value: Any) -> list[float]:

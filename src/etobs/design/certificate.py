@@ -28,11 +28,12 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.design.iss import QuadraticISS
+from etobs.design.iss import QuadraticISS, plant_disturbance_matrix
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.model.functions import Linear, Quadratic
 from etobs.model.rules import DynamicRule, StaticRule
+from etobs.model.signals import Constant, Signal, Sinusoid, Zero
 
 #: Share of the largest admissible rate used by default for ``a_U`` (Theorem 2 needs
 #: ``a_i > a_U / (1 - sigma_i c_i)`` strictly; at the limit ``d_i`` is infinite).
@@ -83,12 +84,16 @@ class Certificate:
     d_U : tuple of float
         Theorem 2's ``d_i`` (item (iv)): ``mu`` bounds ``U = V' + sum d_U[i] eta_i``.
     error_bound : float
-        Ultimate bound on ``|x - xhat|`` from Theorem 2 and the ISS gains, for the
-        disturbance bound given (``nan`` when not available).
+        Ultimate bound on ``|x - xhat|`` from Theorem 2 and the ISS gains, for
+        ``|v| <= disturbance`` (``nan`` when not available).
     iss : QuadraticISS or None
         The ISS gains the numbers rest on, with the ``P`` they come from and how it was
         found (``None`` when certified without ISS gains). Another ``P`` for the same
         ``L`` gives other gains and another error bound.
+    disturbance : float
+        The bound on ``|v(t)|`` (Euclidean norm of the plant's disturbance input, as it
+        enters ``x' = ... + E_v v``) that ``error_bound`` holds for: the one given, or
+        ``sup_t |v(t)|`` of the problem's known ``v`` (``nan`` without an error bound).
 
     """
 
@@ -103,6 +108,7 @@ class Certificate:
     d_U: tuple[float, ...] = ()
     notes: tuple[str, ...] = field(default=())
     iss: QuadraticISS | None = None
+    disturbance: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -155,7 +161,9 @@ class Certificate:
         if math.isfinite(self.scale):
             lines.append(f"V' = lambda V with lambda = {self.scale:.6g}")
         if math.isfinite(self.error_bound):
-            lines.append(f"ultimate bound on |x - xhat|: {self.error_bound:.6g}")
+            lines.append(
+                f"ultimate bound on |x - xhat|: {self.error_bound:.6g} for |v| <= {self.disturbance:.6g}"
+            )
         lines += _rests_on(self.iss)
         lines += [f"note: {n}" for n in self.notes]
         lines.append(f"certificate: {self._verdict()}")
@@ -171,6 +179,7 @@ class Certificate:
         lines.append("  " + ", ".join(f"{k} = {x}" for k, x in self._figures()))
         if self.iss is not None:
             lines.append(f"  rests on ISS gains from P: {self.iss.P_origin or 'given by hand'}")
+        lines += [f"  note: {n}" for n in self.notes]  # what was assumed belongs in the short view too
         return "\n".join(lines)
 
     def _repr_html_(self) -> str:
@@ -240,7 +249,7 @@ def certify(
     a_U: float | None = None,
     E: float | Sequence[float] | None = None,
     noise: Sequence[float] | None = None,
-    disturbance: float = 0.0,
+    disturbance: float | None = None,
 ) -> Certificate:
     """Check the theorems' conditions for the rules of ``problem`` and give the guarantees.
 
@@ -261,8 +270,23 @@ def certify(
         :func:`~etobs.design.rates.estimate_output_rate`).
     noise : sequence of float, optional
         Bounds ``m_i`` on each node's measurement noise (section 7.2).
-    disturbance : float
-        Bound on ``|v|`` used in the error bound.
+    disturbance : float, optional
+        Bound on ``|v(t)|`` at all times, the Euclidean norm of the plant's disturbance
+        input ``v`` (eq. (2)) as it enters ``x' = ... + E_v v``, with the ``E_v`` the ISS
+        gains were computed for (:func:`~etobs.design.quadratic_iss_gains`); it enters the
+        error bound through ``theta``. Default: ``sup_t |v(t)|`` of ``problem.v`` when it
+        is known (zero, a constant, a :class:`~etobs.model.signals.Sinusoid`), with a note;
+        for a function ``v`` there is no error bound without it. Needs ``iss``.
+
+    Raises
+    ------
+    InputError
+        ``a_U`` or ``disturbance`` without ``iss`` (they serve only Theorem 2 and the
+        error bound, which need the ISS gains); ``disturbance`` below ``sup_t |v(t)|``
+        of a known ``problem.v``; ISS gains computed for another disturbance input than
+        the plant's (``E_v`` of another shape than ``(n_x, n_v)``, or other than the
+        matrix :func:`~etobs.design.iss.plant_disturbance_matrix` reads from ``f_p``);
+        a problem the theorems do not cover; a bad argument (the message names it).
 
     """
     if not isinstance(problem, EstimationProblem):
@@ -278,7 +302,6 @@ def certify(
         Es = [v.real(f"E[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(_per_node(E, N))]
         if len(Es) != N:
             raise InputError(f"`E` must be one bound or one per node ({N}); got {len(Es)}")
-    v.real("disturbance", disturbance, lower=0.0)
     if noise is not None and len(noise) != N:
         raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
     ms = [0.0] * N if noise is None else [v.real(f"noise[{i}]", x, lower=0.0) for i, x in enumerate(noise)]
@@ -315,8 +338,111 @@ def certify(
             )
     out = Certificate(conditions=tuple(conds), nodes=tuple(nodes), nu=nu, nu_inf=nu_inf)
     if iss is None:
+        unused = {k: x for k, x in (("a_U", a_U), ("disturbance", disturbance)) if x is not None}
+        if unused:  # dropping them would certify without what was asked
+            got = ", ".join(f"{k} = {x!r}" for k, x in unused.items())
+            raise InputError(
+                f"`{next(iter(unused))}` needs `iss`: `a_U` and `disturbance` serve only Theorem 2 and the "
+                f"error bound, which rest on the observer's ISS gains; got {got} without `iss` (pass the "
+                "gains, e.g. quadratic_iss_gains(...), or leave them out)"
+            )
         return out
-    return _with_iss(out, rules, iss, a_U, disturbance, ms)
+    if not isinstance(iss, QuadraticISS):
+        raise InputError(f"`iss` must be a QuadraticISS; got {type(iss).__name__}")
+    notes = _disturbance_input(problem, iss)
+    bound, note = _disturbance_bound(problem, disturbance)
+    out = replace(out, notes=tuple(notes + ([note] if note else [])))
+    return replace(_with_iss(out, rules, iss, a_U, bound, ms), disturbance=bound)
+
+
+def _disturbance_input(problem: EstimationProblem, iss: QuadraticISS) -> list[str]:
+    """Refuse ISS gains computed for another disturbance input than the plant's (notes otherwise).
+
+    ``theta`` bounds the effect of ``v`` on the error only for the ``E_v`` it was
+    computed with: gains for ``x' = ... + v`` on a plant ``x' = ... + 30 e_4 v`` gave a
+    bound of 0.68 where the error reached 1.6.
+    """
+    plant = problem.plant
+    if plant.n_v == 0:  # no disturbance input: theta does not enter the error bound
+        return []
+    if iss.E_v is None:
+        return [
+            "the ISS gains carry no E_v (given by hand): theta(s) = k_v s^2 is taken as the bound on the "
+            f"effect of |v| on the error, however v enters the plant {plant.name!r}"
+        ]
+    default = iss.E_v.shape[0] == iss.E_v.shape[1] and np.array_equal(iss.E_v, np.eye(iss.E_v.shape[0]))
+    made_for = "the identity, quadratic_iss_gains' default" if default else f"shape {iss.E_v.shape}"
+    fix = (
+        "compute the gains with the plant's disturbance matrix, quadratic_iss_gains(..., E_v=...) "
+        "(`observer.E_v` in an `etobs check` spec)"
+    )
+    if iss.E_v.shape != (plant.n_x, plant.n_v):
+        raise InputError(
+            f"`iss` was computed for a disturbance entering as x' = ... + E_v v with E_v {made_for}; the "
+            f"plant {plant.name!r} has n_x = {plant.n_x} states and n_v = {plant.n_v} disturbance inputs, "
+            f"so E_v must have shape ({plant.n_x}, {plant.n_v}): {fix}"
+        )
+    E_p = plant_disturbance_matrix(plant)
+    if not np.allclose(E_p, iss.E_v, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(E_p).max()))):
+        raise InputError(
+            f"`iss` was computed for a disturbance entering as x' = ... + E_v v with E_v {made_for} "
+            f"{np.asarray(iss.E_v).tolist()}; the plant {plant.name!r} has E_v = {E_p.tolist()} (read from "
+            f"f_p(0, 0, 0, e_j) - f_p(0, 0, 0, 0)): {fix}"
+        )
+    return []
+
+
+def _disturbance_bound(problem: EstimationProblem, disturbance: float | None) -> tuple[float, str]:
+    """The bound on ``|v|`` for the error bound, and a note saying where it came from ("" if given).
+
+    A known ``problem.v`` is bounded exactly; a ``disturbance`` below that bound is
+    refused, since the error bound would not hold for the problem certified.
+    """
+    sup = _sup_norm(problem.v)
+    what = type(problem.v).__name__
+    if disturbance is None:
+        if sup is None:
+            return math.nan, (
+                f"problem.v is a function ({what}), which certify cannot bound: no error bound without "
+                "`disturbance` (a bound on |v(t)|)"
+            )
+        note = (
+            f"disturbance not given: the error bound is for |v| <= sup_t |v(t)| = {sup:.6g}, "
+            f"of problem.v ({what})"
+        )
+        return sup, note if sup > 0 else ""
+    d = v.real("disturbance", disturbance, lower=0.0)
+    if sup is None:
+        return (
+            d,
+            f"disturbance = {d:g} is taken as a bound on |v(t)|; problem.v is a function ({what}), "
+            "not checked",
+        )
+    if d < sup * (1 - 1e-12):
+        raise InputError(
+            f"`disturbance` = {d:g} is below sup_t |v(t)| = {sup:.6g} of the problem's v ({what}): the error "
+            f"bound would not hold for this problem; give disturbance >= {sup:.6g}, or leave it out to use it"
+        )
+    return d, ""
+
+
+def _sup_norm(signal: Signal) -> float | None:
+    """``sup_t |v(t)|`` (Euclidean norm) of a known signal; ``None`` for a function.
+
+    For a sinusoid ``a sin(w t + p) + o`` the norm is convex in ``s = sin(w t + p)``, so
+    its sup over ``s`` in ``[-1, 1]`` is at ``s = +-1`` (``Sinusoid.bound``, which sums
+    ``|a| + |o|`` per component, is larger and would refuse valid values).
+    """
+    if isinstance(signal, Zero):
+        return 0.0
+    if isinstance(signal, Constant):
+        return float(np.linalg.norm(signal.value))
+    if isinstance(signal, Sinusoid):
+        a, o = np.asarray(signal.amplitude), np.asarray(signal.offset)
+        if signal.omega == 0:  # s = sin(phase) for all t
+            return float(np.linalg.norm(a * math.sin(signal.phase) + o))
+        return float(max(np.linalg.norm(o + a), np.linalg.norm(o - a)))
+    return None
 
 
 def _covered(problem: EstimationProblem) -> None:
