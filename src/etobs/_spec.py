@@ -15,6 +15,7 @@ import contextlib
 import datetime
 import math
 import os
+import re
 import stat
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -164,26 +165,40 @@ def check_tree(raw: Any, name: str | None = None) -> None:
             )
 
 
+#: The ``where`` of a spec's top level in :func:`keys`: its keys are written bare
+#: (`horizon`, not `spec.horizon`), as in ``docs/specs.md`` and every other error.
+TOP = "spec"
+
+
 def keys(
     where: str, table: Any, required: Mapping[str, str] | set[str], optional: Iterable[str]
 ) -> dict[str, Any]:
     """``table`` after checking it is a table with the required keys and no others.
 
+    ``where`` is the table's key path, or :data:`TOP` for the spec's top level.
     ``required`` maps each required key to what it expects (``"a number > 0"``), which a
     missing key's error states; the keys of every format are listed in ``docs/specs.md``.
     """
+    top = where == TOP
+    table_name = "the spec" if top else f"`{where}`"
     if not isinstance(table, dict):
-        raise SpecError(f"`{where}` must be a table; got {shown(table)} ({type(table).__name__})")
+        raise SpecError(f"{table_name} must be a table; got {shown(table)} ({type(table).__name__})")
     unknown = sorted(set(table) - set(required) - set(optional))
     if unknown:
         allowed = ", ".join(sorted(set(required) | set(optional)))
-        raise SpecError(f"unknown key `{where}.{unknown[0]}`; allowed keys of `{where}`: {allowed}")
+        of = "allowed top-level keys" if top else f"allowed keys of `{where}`"
+        raise SpecError(f"unknown key `{_path(where, unknown[0])}`; {of}: {allowed}")
     missing = sorted(set(required) - set(table))
     if missing:
         expected = required.get(missing[0]) if isinstance(required, Mapping) else None
         what = f": expected {expected}" if expected else ""
-        raise SpecError(f"missing key `{where}.{missing[0]}`{what}; `{where}` has {_listed(table)}")
+        raise SpecError(f"missing key `{_path(where, missing[0])}`{what}; {table_name} has {_listed(table)}")
     return table
+
+
+def _path(where: str, key: Any) -> str:
+    """The key path of ``key`` in the table ``where`` (a top-level key bare)."""
+    return str(key) if where == TOP else f"{where}.{key}"
 
 
 def _listed(table: dict[str, Any]) -> str:
@@ -211,6 +226,45 @@ def in_file(path: str | Path) -> Iterator[None]:
         if str(path) in str(exc):
             raise
         raise SpecError(f"{path}: {exc}") from exc
+
+
+def spec_path(value: str | Path, folder: str | Path | None) -> Path:
+    """The absolute path of the file ``value`` a spec names, relative to the spec's ``folder``.
+
+    A relative name is taken from the folder of the spec file (``None``: a spec given
+    as a dictionary, taken from the current folder), so a spec means the same files
+    whatever folder it is run from. Used for a deployment's files and for a
+    ``path/file.py:function`` factory.
+    """
+    path = Path(value)
+    if not path.is_absolute() and folder is not None:
+        path = Path(folder) / path
+    return Path(os.path.abspath(path))
+
+
+#: The argument an etobs check names first (`` `p` must be <= 1; got 1.2 ``).
+_ARGUMENT = re.compile(r"`(\w+)`")
+
+
+def argument_named(message: str) -> str | None:
+    """The argument an etobs check's ``message`` starts with, in backquotes (``None``: none)."""
+    found = _ARGUMENT.match(message)
+    return None if found is None else found[1]
+
+
+def renamed(exc: Exception, keys: Mapping[str, str], where: str) -> SpecError:
+    """``exc`` (a check of a class etobs builds from a spec) naming the spec key, not the argument.
+
+    ``keys`` maps the class's arguments to the spec keys that gave them
+    (``{"p": "networks[1].loss"}``): `` `p` must be <= 1`` becomes
+    `` `networks[1].loss` must be <= 1``. A message about another argument is prefixed
+    with ``where``, the table the class was built from.
+    """
+    text = str(exc)
+    arg = argument_named(text)
+    if arg in keys:
+        return SpecError(f"`{keys[arg]}`{text[len(arg) + 2 :]}")
+    return SpecError(f"`{where}`: {text}")
 
 
 def number(

@@ -41,8 +41,9 @@ def compare_spec(factory=LINEAR, params="{}", number="1.0", top=""):
     )
 
 
-def check_spec(factory=LINEAR, params="{}", number="0.0", top=""):
-    return f"{top}[system]\nfactory = {factory}\nparams = {params}\n[guarantees]\ndisturbance = {number}\n"
+def check_spec(factory=LINEAR, params="{}", number="1.0", top=""):
+    # guarantees.E: a number that needs no [observer] (disturbance and a_U do)
+    return f"{top}[system]\nfactory = {factory}\nparams = {params}\n[guarantees]\nE = {number}\n"
 
 
 def deployment_spec(factory=LINEAR, params="{}", number="1.0", top=""):
@@ -57,7 +58,7 @@ def deployment_spec(factory=LINEAR, params="{}", number="1.0", top=""):
 COMMANDS = {
     "sweep": (sweep_spec, ["--executor", "serial"], "horizon.t_end"),
     "compare": (compare_spec, ["--executor", "serial", "--no-plot"], "horizon.t_end"),
-    "check": (check_spec, [], "guarantees.disturbance"),
+    "check": (check_spec, [], "guarantees.E"),
     "serve": (deployment_spec, ["--epoch", "1000.0"], "runtime.duration"),
     "sensor": (deployment_spec, ["--node", "0", "--epoch", "1000.0"], "runtime.duration"),
 }
@@ -87,7 +88,11 @@ SPEC_CASES = [
     ("nan", lambda w: w(number="nan"), r"`{key}` must be finite; got nan"),
     ("a date", lambda w: w(number="1979-05-27"), r"`{key}` .*got a date or time"),
     ("a string for a number", lambda w: w(number='"1.0"'), r"`{key}` must be a number; got '1.0'"),
-    ("a key with a line break", lambda w: w(top='"a\\nb" = 1\n'), r"unknown key `spec.a\\nb`"),
+    (
+        "a key with a line break",
+        lambda w: w(top='"a\\nb" = 1\n'),
+        r"unknown key `a\\nb`; allowed top-level keys",
+    ),
     ("a factory that is not a string", lambda w: w(factory="3"), r"`system.factory` must be a string"),
     ("an unknown factory", lambda w: w(factory='"pendulum"'), r"`system.factory` = 'pendulum' is neither"),
     (
@@ -146,7 +151,7 @@ def test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it(tmp_path, cap
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert re.search(
-        r"failed: runs 0..0 .*SpecError: `system.fixed.sigma` \(row 0, scenario 'default'\): `sigma` must be a real",
+        r"failed: runs 0..0 of chunk \w+: `system.fixed.sigma` \(row 0, scenario 'default'\): `sigma` must be a real",
         err,
     )
 

@@ -12,6 +12,7 @@ import re
 import pytest
 
 from etobs._spec import SpecError
+from etobs.cli.main import main
 from etobs.experiments import load_spec
 
 from .test_bad_input import COMMANDS, one_clear_line, run
@@ -28,8 +29,8 @@ CASES = [
     ),
     (
         "check",
-        ("disturbance = 0.0", "disturbance = [1]"),
-        r"`guarantees.disturbance` must be a number; got \[1\]",
+        ("E = 1.0", 'E = "1"'),
+        r"`guarantees.E` must be a number; got '1'",
     ),
     ("serve", ("period = 0.01", 'period = "0.01"'), r"`runtime.period` must be a number; got '0.01'"),
     (
@@ -90,10 +91,57 @@ CASES = [
     ),
     (
         "check",
-        ("disturbance = 0.0", "disturbance = 0.0\ncolour = 1"),
+        ("E = 1.0", "E = 1.0\ncolour = 1"),
         r"unknown key `guarantees.colour`; allowed",
     ),
     ("serve", ("[plant]", "[plant]\nx1 = 2"), r"unknown key `plant.x1`; allowed keys of `plant`: x0"),
+    # the top level is called as on docs/specs.md: its keys bare (it said `spec.horizn`)
+    (
+        "sweep",
+        ("[horizon]", "[horizn]"),
+        r"unknown key `horizn`; allowed top-level keys: execution, grid, horizon",
+    ),
+    (
+        "compare",
+        ("[horizon]\nt_end = 1.0\n", ""),
+        r"missing key `horizon`: expected a table; the spec has keys ",
+    ),
+    ("check", ("[system]", "[systems]"), r"unknown key `systems`; allowed top-level keys: guarantees, name"),
+    (
+        "serve",
+        ('name = "bad"\n', "colour = 1\n"),
+        r"unknown key `colour`; allowed top-level keys: name, plant",
+    ),
+    # a network's value names its spec key, not the argument of the class built from it (`p`)
+    (
+        "compare",
+        ('kind = "base"\n', 'kind = "base"\n[[networks]]\nname = "lossy"\nloss = 1.2\n'),
+        r"`networks\[0\].loss` must be <= 1; got 1.2$",
+    ),
+    (
+        "compare",
+        (
+            'kind = "base"\n',
+            'kind = "base"\n[[networks]]\nname = "ge"\nloss = { gilbert_elliott = [0.1, 0.0, 0.0, 1.0] }\n',
+        ),
+        r"`networks\[0\].loss.gilbert_elliott\[1\]` must be > 0; got 0$",
+    ),
+    (
+        "compare",
+        ('kind = "base"\n', 'kind = "base"\n[[networks]]\nname = "slow"\ndelay = { uniform = [0.2, 0.1] }\n'),
+        r"`networks\[0\].delay.uniform\[1\]` must be >= 0.2; got 0.1$",
+    ),
+    (
+        "compare",
+        ('kind = "base"\n', 'kind = "base"\n[[networks]]\nname = "late"\ndelay = -1.0\n'),
+        r"`networks\[0\].delay` must be >= 0; got -1$",
+    ),
+    # a rule is named by position, as every other error names it (it said `rules['base'].delta`)
+    (
+        "compare",
+        ('kind = "base"', 'kind = "send_on_delta"\ndelta = [0.1, 0.2, 0.3]'),
+        r"`rules\[0\].delta` has 3 values but the problem has 1 nodes",
+    ),
 ]
 
 
@@ -154,7 +202,7 @@ def test_check_refuses_both_e_and_its_estimate(tmp_path, capsys):
     # E_estimate was used and E ignored without a word
     writer, _, _ = COMMANDS["check"]
     spec = tmp_path / "spec.toml"
-    spec.write_text(writer() + "E = 1.0\nE_estimate = { low = [0.0, 0.0], high = [1.0, 1.0] }\n")
+    spec.write_text(writer() + "E_estimate = { low = [0.0, 0.0], high = [1.0, 1.0] }\n")
     line = one_clear_line(*run(["check", str(spec)], capsys))
     assert line.endswith("give either `guarantees.E` or `guarantees.E_estimate`, not both")
 
@@ -172,3 +220,90 @@ def test_a_deployment_given_as_a_dictionary_is_checked_as_a_file_is(tmp_path):
     }
     with pytest.raises(SpecError, match=r"^`system.params.eps` must be a number, .*; got a date or time"):
         parse_deployment(raw, tmp_path)
+
+
+#: A marked factory next to the spec (the linear oscillator) and a same-named one in the
+#: current folder that says so if it is ever used.
+NEXT_TO_SPEC = """
+import etobs
+
+@etobs.factory
+def problem():
+    from tests.estimation.linear import factory
+    return factory()
+"""
+IN_CWD = """
+import etobs
+
+@etobs.factory
+def problem():
+    raise RuntimeError("the models.py of the current folder was used")
+"""
+
+
+@pytest.fixture
+def two_folders(tmp_path, monkeypatch):
+    """``(spec folder, current folder)``, each with a ``models.py``; the current folder is the second."""
+    spec_dir, cwd = tmp_path / "project", tmp_path / "elsewhere"
+    spec_dir.mkdir()
+    cwd.mkdir()
+    (spec_dir / "models.py").write_text(NEXT_TO_SPEC)
+    (cwd / "models.py").write_text(IN_CWD)
+    monkeypatch.chdir(cwd)
+    return spec_dir, cwd
+
+
+@pytest.mark.parametrize("command", ["sweep", "compare", "check"])
+def test_a_relative_factory_file_is_taken_from_the_spec_folder_not_the_current_one(
+    command, two_folders, capsys
+):
+    # `cd /tmp && etobs sweep /tmp/newuser/sweep.toml` said "cannot import 'sweepmodels.py': no
+    # such file", and run from a folder holding another sweepmodels.py it used that one
+    spec_dir, cwd = two_folders
+    writer, extra, _ = COMMANDS[command]
+    spec = spec_dir / "spec.toml"
+    spec.write_text(writer(factory='"models.py:problem"'))
+    out = ["--out", str(cwd / "out")] if command != "check" else []
+    code = main([command, str(spec), *extra, *out])  # SystemExit on an error
+    err = capsys.readouterr().err
+    assert "current folder was used" not in err and "error" not in err, err
+    assert code == 0 or (command == "check" and code == 1), err  # check: 1 if a condition fails
+
+
+def test_a_relative_factory_file_of_a_deployment_is_taken_from_its_folder(two_folders):
+    from etobs.cli.runtime import load
+
+    spec_dir, _ = two_folders
+    writer, _, _ = COMMANDS["serve"]
+    (spec_dir / "deploy.toml").write_text(writer(factory='"models.py:problem"'))
+    dep = load(str(spec_dir / "deploy.toml"))
+    assert dep.factory == f"{spec_dir / 'models.py'}:problem"
+    assert dep.problem().plant.n_x == 2  # the spec folder's file, not the current folder's
+
+
+@pytest.mark.parametrize("command", ["sweep", "compare", "check", "serve"])
+def test_a_missing_factory_file_names_the_absolute_path_tried(command, two_folders, capsys):
+    spec_dir, _ = two_folders
+    writer, extra, _ = COMMANDS[command]
+    spec = spec_dir / "spec.toml"
+    spec.write_text(writer(factory='"sub/nothere.py:problem"'))
+    line = one_clear_line(*run([command, str(spec), *extra], capsys))
+    tried = re.escape(str(spec_dir / "sub" / "nothere.py"))
+    assert re.search(rf"`system.factory`: cannot import '{tried}': no such file$", line), line
+
+
+def test_a_module_not_on_the_path_says_where_it_is_looked_for_and_what_to_write(two_folders, capsys):
+    # the installed `etobs` script said only "no module named 'mychain'" (its sys.path[0] is the
+    # venv's bin, so a module next to the spec or in the current folder is not found)
+    spec_dir, _ = two_folders
+    (spec_dir / "mychain.py").write_text(NEXT_TO_SPEC)
+    writer, extra, _ = COMMANDS["sweep"]
+    spec = spec_dir / "spec.toml"
+    spec.write_text(writer(factory='"mychain:problem"'))
+    line = one_clear_line(*run(["sweep", str(spec), *extra], capsys))
+    assert re.search(
+        r"cannot import 'mychain': no module named 'mychain' on Python's path \(the installed `etobs` "
+        r"command does not look in the current folder or the spec's; `python -m etobs` looks in the "
+        r"current folder\): for a file next to the spec write 'mychain.py:<function>', or install",
+        line,
+    ), line

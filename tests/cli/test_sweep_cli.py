@@ -100,7 +100,7 @@ def test_bad_spec_is_one_clear_line(tmp_path, capsys):
         main(["sweep", str(spec)])
     assert info.value.code == 2
     assert capsys.readouterr().err.strip() == (
-        f"etobs: error: {spec}: missing key `spec.initial_states`: expected a table; `spec` has keys horizon, system"
+        f"etobs: error: {spec}: missing key `initial_states`: expected a table; the spec has keys horizon, system"
     )
 
 

@@ -1,6 +1,7 @@
 """A spec names code: only functions marked with ``@etobs.factory`` may be called, and a
 module whose source does not mark the function is refused without being imported."""
 
+import re
 import sys
 
 import pytest
@@ -226,3 +227,87 @@ def test_a_module_attribute_lookup_that_fails_is_a_spec_error(tmp_path, monkeypa
             resolve_factory("lazy_mod:maker")
     finally:
         del sys.modules["lazy_mod"]
+
+
+SCALAR = """
+import etobs
+from tests.experiments.factories import scalar
+
+
+@etobs.factory
+def problem(**kwargs):
+    return scalar(**kwargs)
+"""
+UNUSED = """
+import etobs
+
+
+@etobs.factory
+def problem(**kwargs):
+    raise RuntimeError("the models.py of the current folder was used")
+"""
+
+
+@pytest.fixture
+def spec_and_cwd(tmp_path, monkeypatch):
+    """A sweep spec file naming ``models.py:problem`` next to it; the current folder holds another."""
+    from .conftest import raw_spec
+
+    spec_dir, cwd = tmp_path / "project", tmp_path / "elsewhere"
+    spec_dir.mkdir()
+    cwd.mkdir()
+    (spec_dir / "models.py").write_text(SCALAR)
+    (cwd / "models.py").write_text(UNUSED)
+    raw = raw_spec(system={"factory": "models.py:problem", "fixed": {}})
+    (spec_dir / "spec.toml").write_text(
+        'name = "tiny"\n[system]\nfactory = "models.py:problem"\n[[rows]]\nk = 1.0\n[[scenarios]]\nname = "a"\n'
+        "[initial_states]\nlow = [-1.0]\nhigh = [1.0]\nruns = 5\nseed = 7\n[horizon]\nt_end = 3.0\n"
+    )
+    monkeypatch.chdir(cwd)
+    return spec_dir / "spec.toml", raw
+
+
+def test_load_spec_takes_a_relative_factory_file_from_the_spec_folder(spec_and_cwd):
+    from etobs.experiments import load_spec
+
+    path, _ = spec_and_cwd
+    spec = load_spec(path)
+    # made absolute in the spec (and in the raw spec its workers and with_runs read)
+    assert spec.factory == f"{path.parent / 'models.py'}:problem"
+    assert spec.raw["system"]["factory"] == spec.factory
+    for s in (spec, spec.with_runs(2), spec.with_backend("scipy")):
+        assert s.problem(0).plant.n_x == 1  # a same-named file in the current folder is not used
+
+
+def test_a_spec_given_as_a_dictionary_takes_a_relative_factory_file_from_the_current_folder(spec_and_cwd):
+    from etobs.experiments import parse_spec
+    from etobs.experiments.compare_spec import parse_compare_spec
+
+    path, raw = spec_and_cwd
+    with pytest.raises(SpecError, match=r"the models.py of the current folder was used"):
+        parse_spec(raw).problem(0)
+    assert parse_spec(raw, folder=path.parent).problem(0).plant.n_x == 1
+    compare = {k: v for k, v in raw.items() if k not in ("rows", "scenarios")}
+    compare["system"] = {"factory": "models.py:problem", "params": {"k": 1.0}}
+    compare["rules"] = [{"name": "base", "kind": "base"}]
+    assert parse_compare_spec(compare, folder=path.parent).base().plant.n_x == 1
+    with pytest.raises(SpecError, match=r"the models.py of the current folder was used"):
+        parse_compare_spec(compare).base()
+    (path.parent.parent / "elsewhere" / "models.py").unlink()
+    tried = re.escape(str(path.parent.parent / "elsewhere" / "models.py"))
+    with pytest.raises(
+        SpecError,
+        match=rf"cannot import '{tried}': no such file \(a spec given as a dictionary: from the current folder\)",
+    ):
+        parse_spec(raw).problem(0)
+
+
+def test_locate_factory_changes_only_a_relative_file(tmp_path):
+    from etobs.examples.registry import locate_factory
+
+    assert locate_factory("m.py:f", tmp_path) == f"{tmp_path / 'm.py'}:f"
+    assert locate_factory("../m.py:f", tmp_path / "a") == f"{tmp_path / 'm.py'}:f"
+    assert locate_factory("/abs/m.py:f", tmp_path) == "/abs/m.py:f"
+    assert locate_factory("m.py:f", None) == "m.py:f"
+    for unchanged in ("robot_arm", "pkg.mod:f", 3, "nonsense"):
+        assert locate_factory(unchanged, tmp_path) == unchanged

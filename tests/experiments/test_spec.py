@@ -37,7 +37,7 @@ def test_with_runs_and_seed():
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        ({"colour": 1}, r"unknown key `spec.colour`; allowed keys of `spec`: execution, grid, horizon"),
+        ({"colour": 1}, r"unknown key `colour`; allowed top-level keys: execution, grid, horizon"),
         ({"horizon": {"t_end": 3.0, "dt": 1}}, r"unknown key `horizon.dt`"),
         ({"horizon": {"t_end": -1.0}}, r"`horizon.t_end` must be > 0; got -1.0"),
         ({"horizon": {"t_end": "30"}}, r"`horizon.t_end` must be a number; got '30'"),

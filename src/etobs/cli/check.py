@@ -43,6 +43,7 @@ import re
 import sys
 from collections.abc import Collection, Iterator
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -54,7 +55,7 @@ from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.cli._args import load_toml
 from etobs.errors import InputError, InputTypeError
-from etobs.examples.registry import make_problem, resolve_factory
+from etobs.examples.registry import located, make_problem, resolve_factory
 
 PACKAGED = {"robot_arm": "robot_arm_check.toml"}
 _OBSERVER_KEYS = ("structure", "A", "C", "G", "H", "slopes", "L", "P", "Q", "c_v", "c", "E_v")
@@ -71,7 +72,8 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the problem and the ISS gains of the spec, certify, print; 1 if a condition fails."""
-    raw = _load(args.spec)
+    # a relative factory file is taken from the spec's folder, as in every format
+    raw = located(_load(args.spec), None if args.spec in PACKAGED else Path(args.spec).resolve().parent)
     top = _keys("spec", raw, {"system": TABLE}, {"observer", "guarantees", "name"})
     system = _keys("system", top["system"], {"factory": FACTORY}, {"params"})
     params = system.get("params", {})

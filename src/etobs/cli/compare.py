@@ -43,8 +43,9 @@ def add_parser(sub: Any) -> None:
 
 
 def load(name: str) -> CompareSpec:
-    """A packaged spec by name, or a TOML file."""
-    return parse_compare_spec(load_toml(name, PACKAGED, "etobs.experiments"))
+    """A packaged spec by name, or a TOML file (a relative factory file is taken from its folder)."""
+    folder = None if name in PACKAGED else Path(name).resolve().parent
+    return parse_compare_spec(load_toml(name, PACKAGED, "etobs.experiments"), folder=folder)
 
 
 def run(args: argparse.Namespace) -> int:

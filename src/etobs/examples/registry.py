@@ -27,7 +27,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from etobs._spec import SpecError, is_factory
+from etobs._spec import SpecError, is_factory, spec_path
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.robot_arm import robot_arm, robot_arm_network
@@ -40,6 +40,14 @@ REGISTRY: dict[str, Callable[..., EstimationProblem]] = {
 
 #: How many imports deep a re-exported factory is followed to where it is marked.
 MAX_REEXPORTS = 8
+#: Where a module is looked for, and what to write instead, when it is not found. The
+#: module is not looked for in the spec's folder: a file there is named as one (and the
+#: installed ``etobs`` script's ``sys.path[0]`` is its own folder, not the current one).
+_NOT_ON_PATH = (
+    " on Python's path (the installed `etobs` command does not look in the current folder or "
+    "the spec's; `python -m etobs` looks in the current folder): for a file next to the spec write "
+    "'{full}.py:<function>', or install the module or add its folder to PYTHONPATH"
+)
 #: The fix, in every refusal.
 _FIX = "mark it with @etobs.factory if a spec may call it (a spec names code: see docs/specs.md)"
 
@@ -73,6 +81,37 @@ def resolve_factory(name: str) -> Callable[..., EstimationProblem]:
     if not is_factory(fn):
         raise SpecError(f"`system.factory` = {name!r} is not marked as a factory; {_FIX}")
     return fn
+
+
+def locate_factory(name: Any, folder: str | Path | None) -> Any:
+    """``name`` with a relative ``path/file.py`` made absolute from the spec's ``folder``.
+
+    Every format calls it on ``system.factory`` as it reads a spec file, with the file's
+    folder (:func:`etobs._spec.spec_path`, as a deployment's files), so a spec names the
+    same file whatever folder it is run from; a same-named file in the current folder is
+    not used. ``folder=None`` (a spec given as a dictionary) takes a relative path from
+    the current folder when it is resolved. A registered name, a module and anything
+    that is not a file factory (refused later, naming the key) are returned unchanged.
+    """
+    if not isinstance(name, str) or name in REGISTRY or folder is None:
+        return name
+    where, _, attr = name.rpartition(":")
+    if not where.endswith(".py"):
+        return name
+    return f"{spec_path(where, folder)}:{attr}"
+
+
+def located(raw: Any, folder: str | Path | None) -> Any:
+    """The spec ``raw`` with its ``system.factory`` located from ``folder`` (:func:`locate_factory`).
+
+    ``raw`` itself is not changed; one that has no ``system.factory`` is returned as it
+    is (its parser names what is missing).
+    """
+    system = raw.get("system") if isinstance(raw, dict) else None
+    if not isinstance(system, dict) or "factory" not in system:
+        return raw
+    factory = locate_factory(system["factory"], folder)
+    return raw if factory == system["factory"] else {**raw, "system": {**system, "factory": factory}}
 
 
 def check_arguments(factory: str, calls: Iterable[tuple[str, dict[str, Any]]]) -> None:
@@ -132,9 +171,12 @@ def _load_file(name: str, where: str, attr: str) -> ModuleType:
     factory more than once) does not run the file again, and code that looks its module
     up there (dataclasses, pickle) works.
     """
-    path = Path(where)
+    path = spec_path(where, None)  # a spec given as a dictionary: from the current folder
     if not path.is_file():
-        raise SpecError(f"`system.factory`: cannot import {where!r}: no such file")
+        relative = (
+            "" if Path(where).is_absolute() else " (a spec given as a dictionary: from the current folder)"
+        )
+        raise SpecError(f"`system.factory`: cannot import {str(path)!r}: no such file{relative}")
     st = path.stat()
     ident = f"{path.resolve()}\0{st.st_size}\0{st.st_mtime_ns}"
     module_name = f"_etobs_factory_file_{hashlib.sha256(ident.encode()).hexdigest()[:16]}"
@@ -143,14 +185,16 @@ def _load_file(name: str, where: str, attr: str) -> ModuleType:
     _require_mark(name, path, attr, None)
     loc = importlib.util.spec_from_file_location(module_name, path)
     if loc is None or loc.loader is None:
-        raise SpecError(f"`system.factory`: cannot import {where!r}: not a Python file")
+        raise SpecError(f"`system.factory`: cannot import {str(path)!r}: not a Python file")
     module = importlib.util.module_from_spec(loc)
     sys.modules[module_name] = module
     try:
         loc.loader.exec_module(module)
     except Exception as exc:
         del sys.modules[module_name]
-        raise SpecError(f"`system.factory`: importing {where!r} failed: {type(exc).__name__}: {exc}") from exc
+        raise SpecError(
+            f"`system.factory`: importing {str(path)!r} failed: {type(exc).__name__}: {exc}"
+        ) from exc
     return module
 
 
@@ -190,7 +234,8 @@ def _source_of(module: str) -> Path | None:
             places = None if spec is None else spec.submodule_search_locations
             spec = None if places is None else importlib.machinery.PathFinder.find_spec(full, list(places))
         if spec is None:
-            raise SpecError(f"`system.factory`: cannot import {module!r}: no module named {full!r}")
+            hint = _NOT_ON_PATH.format(full=full) if i == 0 else ""
+            raise SpecError(f"`system.factory`: cannot import {module!r}: no module named {full!r}{hint}")
     origin = spec.origin if spec is not None else None
     if not origin or not origin.endswith(".py") or not Path(origin).is_file():
         return None

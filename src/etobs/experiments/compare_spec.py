@@ -9,19 +9,22 @@ this parser. The tables shared with a sweep spec are parsed by
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from pathlib import Path
+from typing import Any, TypeVar
 
-from etobs._spec import SpecError, check_tree
+from etobs._spec import SpecError, check_tree, renamed
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
+from etobs.examples.registry import located
 from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build
 from etobs.model.network import (
+    BernoulliLoss,
     ConstantDelay,
     Delay,
     ExponentialDelay,
@@ -32,6 +35,8 @@ from etobs.model.network import (
     UniformDelay,
 )
 from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
+
+_T = TypeVar("_T")
 
 #: Keys of each rule kind (besides ``name``, ``kind`` and ``observer_copy``).
 RULE_KINDS: dict[str, tuple[str, ...]] = {
@@ -58,11 +63,13 @@ class RuleEntry:
     kind: str
     params: dict[str, Any]
     observer_copy: bool = False
+    #: Its key path in errors, by position as every parser error writes it (``rules[3]``).
+    where: str = field(default="rules[]", compare=False)
 
     def value(self, key: str, node: int, n_nodes: int) -> float:
         """The parameter ``key`` of ``node``: a number for all nodes, or one per node."""
         raw = self.params[key]
-        where = f"rules[{self.name!r}].{key}"
+        where = f"{self.where}.{key}"
         if isinstance(raw, list):
             if len(raw) != n_nodes:
                 raise SpecError(f"`{where}` has {len(raw)} values but the problem has {n_nodes} nodes")
@@ -79,7 +86,7 @@ class RuleEntry:
             if self.kind == "dynamic":
                 if not isinstance(base, DynamicRule):
                     raise SpecError(
-                        f"`rules[{self.name!r}]`: kind 'dynamic' changes a DynamicRule, but node {node}'s "
+                        f"`{self.where}`: kind 'dynamic' changes a DynamicRule, but node {node}'s "
                         f"base rule is a {type(base).__name__}"
                     )
                 return replace(base, **p)
@@ -87,12 +94,12 @@ class RuleEntry:
                 gamma = getattr(base, "gamma", None)
                 if gamma is None:
                     raise SpecError(
-                        f"`rules[{self.name!r}]`: kind 'static' takes gamma from the base rule, but node "
+                        f"`{self.where}`: kind 'static' takes gamma from the base rule, but node "
                         f"{node}'s {type(base).__name__} has none"
                     )
                 eps = p.get("eps", getattr(base, "eps", None))
                 if eps is None:
-                    raise SpecError(f"`rules[{self.name!r}].eps` is missing (the base rule has none)")
+                    raise SpecError(f"`{self.where}.eps` is missing (the base rule has none)")
                 return StaticRule(gamma=gamma, eps=eps)
             if self.kind == "periodic":
                 return PeriodicRule(p["period"])
@@ -102,9 +109,9 @@ class RuleEntry:
         except SpecError:
             raise
         except EtobsError as exc:
-            raise SpecError(f"`rules[{self.name!r}]`, node {node}: {exc}") from exc
+            raise SpecError(f"`{self.where}`, node {node}: {exc}") from exc
         except (KeyError, TypeError) as exc:
-            raise SpecError(f"`rules[{self.name!r}]`: missing or wrong parameter ({exc})") from exc
+            raise SpecError(f"`{self.where}`: missing or wrong parameter ({exc})") from exc
 
     def apply(self, base: EstimationProblem, network: Network | None) -> EstimationProblem:
         """The base problem with this rule on every output node, and ``network``."""
@@ -211,9 +218,15 @@ def _why_not(rule: RuleEntry, network: NetworkEntry) -> str:
     return COPY_NEEDS_IDEAL if rule.observer_copy and network.network is not None else ""
 
 
-def parse_compare_spec(raw: dict[str, Any]) -> CompareSpec:
-    """Validate a comparison spec given as a dictionary (the parsed TOML)."""
+def parse_compare_spec(raw: dict[str, Any], *, folder: str | Path | None = None) -> CompareSpec:
+    """Validate a comparison spec given as a dictionary (the parsed TOML).
+
+    A relative ``path/file.py`` factory is taken from ``folder`` (the spec file's; made
+    absolute in the spec's ``raw``, which its workers read), or from the current folder
+    when it is called if ``folder`` is ``None``.
+    """
     check_tree(raw)
+    raw = located(raw, folder)
     required, optional = COMMON_KEYS
     rules = "a non-empty array of tables ([[rules]])"
     top = _keys("spec", raw, {**required, "rules": rules}, optional | {"networks"})
@@ -258,7 +271,7 @@ def _rule(where: str, table: Any) -> RuleEntry:
     for k, val in params.items():
         for i, x in enumerate(val if isinstance(val, list) else [val]):
             _number(f"{where}.{k}" + (f"[{i}]" if isinstance(val, list) else ""), x)
-    return RuleEntry(name=_entry_name(where, t), kind=kind, params=params, observer_copy=copy)
+    return RuleEntry(name=_entry_name(where, t), kind=kind, params=params, observer_copy=copy, where=where)
 
 
 def _network(where: str, table: Any) -> NetworkEntry:
@@ -282,24 +295,48 @@ def _network(where: str, table: Any) -> NetworkEntry:
 
 def _delay(where: str, value: Any) -> Delay:
     if not isinstance(value, dict):
-        return ConstantDelay(float(_number(where, value, lower=0.0)))
+        return _made(ConstantDelay, where, {"d": (float(_number(where, value)), where)})
     t = _keys(where, value, set(), {"uniform", "exponential"})
     if len(t) != 1:
         raise SpecError(f"`{where}` must give exactly one of uniform = [lo, hi], exponential = [scale, min]")
     ((kind, args),) = t.items()
     nums = _numbers(f"{where}.{kind}", args, 2)
-    return UniformDelay(*nums) if kind == "uniform" else ExponentialDelay(*nums)
+    cls, names = (
+        (UniformDelay, ("low", "high")) if kind == "uniform" else (ExponentialDelay, ("scale", "minimum"))
+    )
+    return _made(
+        cls, where, {n: (x, f"{where}.{kind}[{i}]") for i, (n, x) in enumerate(zip(names, nums, strict=True))}
+    )
 
 
 def _loss(where: str, value: Any) -> float | Loss | None:
     if value is None:
         return None
     if not isinstance(value, dict):
-        return float(_number(where, value, lower=0.0))
+        return _made(BernoulliLoss, where, {"p": (float(_number(where, value)), where)})
     t = _keys(
         where, value, {"gilbert_elliott": "a list of 4 numbers [p_gb, p_bg, loss_good, loss_bad]"}, set()
     )
-    return GilbertElliottLoss(*_numbers(f"{where}.gilbert_elliott", t["gilbert_elliott"], 4))
+    nums = _numbers(f"{where}.gilbert_elliott", t["gilbert_elliott"], 4)
+    names = ("p_gb", "p_bg", "loss_good", "loss_bad")
+    return _made(
+        GilbertElliottLoss,
+        where,
+        {n: (x, f"{where}.gilbert_elliott[{i}]") for i, (n, x) in enumerate(zip(names, nums, strict=True))},
+    )
+
+
+def _made(cls: type[_T], where: str, args: dict[str, tuple[float, str]]) -> _T:
+    """``cls(**{argument: value})`` for ``args = {argument: (value, spec key)}``.
+
+    The class checks its arguments (one implementation of each limit); its error names
+    the spec key the value came from (`` `networks[1].loss` must be <= 1``), not the
+    class's argument (`` `p` ``).
+    """
+    try:
+        return cls(**{n: x for n, (x, _) in args.items()})
+    except EtobsError as exc:
+        raise renamed(exc, {n: key for n, (_, key) in args.items()}, where) from exc
 
 
 def _numbers(where: str, value: Any, n: int) -> list[float]:

@@ -22,6 +22,7 @@ from etobs._spec import name as _name
 from etobs._validate import shown
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
+from etobs.examples.registry import located
 from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build, check_arguments
 
@@ -138,14 +139,21 @@ def load_spec(path: str | Path) -> SweepSpec:
     """Read (at most 1 MiB, :func:`etobs._spec.read_toml`) and validate a TOML sweep spec.
 
     An error names the file, the key and what it expects (the keys: ``docs/specs.md``).
+    A relative ``path/file.py`` factory is taken from the spec file's folder.
     """
     with in_file(path):
-        return parse_spec(read_toml(path))
+        return parse_spec(read_toml(path), folder=Path(path).resolve().parent)
 
 
-def parse_spec(raw: dict[str, Any]) -> SweepSpec:
-    """Validate a spec given as a dictionary (the parsed TOML)."""
+def parse_spec(raw: dict[str, Any], *, folder: str | Path | None = None) -> SweepSpec:
+    """Validate a spec given as a dictionary (the parsed TOML).
+
+    A relative ``path/file.py`` factory is taken from ``folder`` (the spec file's; made
+    absolute in the spec's ``raw``, which its workers read), or from the current folder
+    when it is called if ``folder`` is ``None``.
+    """
     check_tree(raw)
+    raw = located(raw, folder)
     required, optional = COMMON_KEYS
     top = _keys("spec", raw, required, optional | {"rows", "grid", "scenarios"})
     common = parse_common(top, default_name="sweep", kwargs_key="fixed")

@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import tempfile
 import warnings
 from collections.abc import Iterator
@@ -71,7 +72,11 @@ def _chunk_problem(data: Any, key: str) -> str:
 def last_line(failure: dict[str, Any]) -> str:
     """The last line of a stored failure's error (the exception), for reports."""
     text = str(failure.get("error", "")).strip()
-    return text.splitlines()[-1] if text else "unknown error"
+    if not text:
+        return "unknown error"
+    # an etobs error's message names the key and the value; its class path
+    # (etobs._spec.SpecError) is internal, so only the message is shown
+    return re.sub(r"^etobs(?:\.\w+)+: ", "", text.splitlines()[-1])
 
 
 def atomic_write(path: Path, text: str | bytes) -> None:

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import FACTORY, TABLE, SpecError, check_tree
+from etobs._spec import FACTORY, TABLE, SpecError, check_tree, spec_path
 from etobs._spec import keys as _keys
 from etobs._spec import name as _name
 from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.estimation.problem import EstimationProblem
-from etobs.examples.registry import make_problem
+from etobs.examples.registry import locate_factory, make_problem
 from etobs.runtime.server import is_loopback
 
 #: Largest secret or token read: they are 32 and 43 bytes.
@@ -211,12 +211,12 @@ def parse_deployment(raw: dict[str, Any], base: Path = Path(".")) -> Deployment:
             return None
         if not isinstance(value, str) or not value:
             raise SpecError(f"`runtime.{key}` must be a file name; got {shown(value)}")
-        return Path(value) if Path(value).is_absolute() else base / value
+        return spec_path(value, base)
 
     secret_file = path("secret_file", None) or base / "etobs.secret"
     return Deployment(
         name=name,
-        factory=system["factory"],
+        factory=locate_factory(system["factory"], base),  # a relative file: from base, as the files
         params=dict(params),
         period=float(_number("runtime.period", rt["period"], lower=0.0, strict=True)),
         duration=float(_number("runtime.duration", rt["duration"], lower=0.0, strict=True)),
