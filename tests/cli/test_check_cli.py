@@ -204,3 +204,111 @@ def test_check_refuses_a_bad_P(tmp_path, capsys, change, message):
     err = capsys.readouterr().err
     assert re.search(message, err), err
     assert "Traceback" not in err
+
+
+# --- what `disturbance` bounds (issue 15): the wind chain of tests/design/wind_chain.py ------------
+
+WIND = Path(__file__).parents[1] / "design" / "wind_chain.py"
+
+
+def _wind_spec(tmp_path, observer="", guarantees="", e_scale=30.0):
+    """A spec of the wind chain (v entering as e_scale e_4) with the designed L and P."""
+    from etobs.design import observer_gain, propose_rules, quadratic_iss_gains
+    from tests.design import chain, wind_chain
+
+    gain = observer_gain(wind_chain.A, wind_chain.C, objective="max_decay", max_gain=5.0)
+    iss = quadratic_iss_gains(gain, wind_chain.NODES, c_v=0.1, c=[0.1, 0.1])
+    rules = propose_rules(iss, sigma=[2.0, 2.0], c=[0.05, 0.05], nu=0.05).rules
+    params = {
+        "L": gain.L.tolist(),
+        **chain.rule_params(rules),
+        "e_scale": e_scale,
+        "const": True,
+        "wind": 0.05,
+    }
+    table = ", ".join(
+        f"{k} = {str(v).lower() if isinstance(v, bool) else repr(v)}" for k, v in params.items()
+    )
+    spec = tmp_path / "wind.toml"
+    spec.write_text(
+        f'[system]\nfactory = "{WIND}:mychain"\nparams = {{ {table} }}\n'
+        f"[observer]\nA = {wind_chain.A.tolist()}\nC = {wind_chain.C.tolist()}\nL = {gain.L.tolist()}\n"
+        f"P = {gain.P.tolist()}\nc_v = 0.1\nc = [0.1, 0.1]\n{observer}[guarantees]\nE = 5.0\n{guarantees}"
+    )
+    return str(spec), gain, params
+
+
+def test_check_takes_the_plant_s_disturbance_matrix_and_says_so(tmp_path, capsys):
+    from etobs.design import certify, check_gain, quadratic_iss_gains
+    from tests.design import wind_chain
+
+    path, gain, params = _wind_spec(tmp_path, guarantees="disturbance = 0.05\n")
+    assert main(["check", path, "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert cli["iss"]["E_v"] == [[0.0], [0.0], [0.0], [30.0]] and cli["disturbance"] == 0.05
+    assert cli["notes"] == [
+        "no observer.E_v given: theta is for the plant's disturbance input E_v = [[0.0], [0.0], [0.0], [30.0]], "
+        "read from f_p (x' = ... + E_v v), not for quadratic_iss_gains' default, the identity"
+    ]
+    # the same bound as certify with the plant's E_v (before: the identity's, 30 times too small)
+    again = check_gain(wind_chain.A, wind_chain.C, gain.L, P=gain.P)
+    iss = quadratic_iss_gains(
+        again, wind_chain.NODES, c_v=0.1, c=[0.1, 0.1], E_v=wind_chain.disturbance_matrix(30.0)
+    )
+    py = certify(wind_chain.mychain(**params), iss, E=5.0, disturbance=0.05)
+    assert cli["error_bound"] == py.error_bound
+    # given as observer.E_v: the same certificate, without the note
+    path, _, _ = _wind_spec(tmp_path, observer="E_v = [[0.0], [0.0], [0.0], [30.0]]\n")
+    assert main(["check", path]) == 0
+    out = capsys.readouterr().out
+    assert f"ultimate bound on |x - xhat|: {py.error_bound:.6g} for |v| <= 0.05\n" in out
+    assert (
+        "note: disturbance not given: the error bound is for |v| <= sup_t |v(t)| = 0.05, of problem.v" in out
+    )
+    assert "no observer.E_v given" not in out
+
+
+@pytest.mark.parametrize(
+    ("observer", "guarantees", "message"),
+    [
+        (
+            "E_v = [[0.0], [0.0], [0.0], [1.0]]\n",
+            "",
+            r"error: `iss` was computed for a disturbance entering as x' = \.\.\. \+ E_v v with E_v shape \(4, 1\) "
+            r"\[\[0\.0\], \[0\.0\], \[0\.0\], \[1\.0\]\]; the plant 'linear plant' has E_v = \[\[0\.0\], \[0\.0\], "
+            r"\[0\.0\], \[30\.0\]\] .*\(`observer\.E_v` in an `etobs check` spec\)",
+        ),
+        ("E_v = [[0.0], [1.0]]\n", "", r"error: [^`]*`observer\.E_v` has shape \(2, 1\); expected \(4, 1\)"),
+        (
+            "",
+            "disturbance = 0.01\n",
+            r"error: [^`]*`guarantees\.disturbance` = 0\.01 is below sup_t \|v\(t\)\| = 0\.05 of the problem's v "
+            r"\(Constant\)",
+        ),
+    ],
+)
+def test_check_refuses_a_disturbance_it_cannot_certify(tmp_path, capsys, observer, guarantees, message):
+    path, _, _ = _wind_spec(tmp_path, observer=observer, guarantees=guarantees)
+    with pytest.raises(SystemExit) as exc:
+        main(["check", path])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert "Traceback" not in err
+
+
+def test_check_refuses_a_U_and_disturbance_without_an_observer(tmp_path, capsys):
+    # the new user's c7.toml: before, exit 0 and "all conditions hold", the two keys unused
+    spec = tmp_path / "c7.toml"
+    spec.write_text(
+        SPEC.format(sigma2=800.0).split("[observer]")[0] + "[guarantees]\na_U = 0.18\ndisturbance = 0.01\n"
+    )
+    with pytest.raises(SystemExit) as exc:
+        main(["check", str(spec)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert (
+        "c7.toml: `guarantees.a_U` needs an `[observer]` table: a_U and disturbance serve only Theorem 2"
+        in err
+    )
+    assert "add `[observer]` or remove `guarantees.a_U` and `guarantees.disturbance`" in err
