@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import itertools
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError, check_tree, in_file, read_toml
+from etobs._spec import SpecError, argument_named, check_tree, in_file, read_toml
 from etobs._spec import keys as _keys
 from etobs._spec import name as _name
 from etobs._validate import shown
@@ -108,10 +107,10 @@ class SweepSpec(Experiment):
             return build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
         except SpecError as exc:
             cause = exc.__cause__
-            named = re.match(r"`(\w+)`", str(cause)) if isinstance(cause, EtobsError) else None
-            if named is None or named[1] not in kwargs or isinstance(cause, SpecError):
+            named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
+            if named is None or named not in kwargs or isinstance(cause, SpecError):
                 raise
-            raise SpecError(f"`{self.origin(group, named[1])}` ({self.where(group)}): {cause}") from cause
+            raise SpecError(f"`{self.origin(group, named)}` ({self.where(group)}): {cause}") from cause
 
     def origin(self, group: int, key: str) -> str:
         """The spec key that gives the factory's argument ``key`` in ``group``.
