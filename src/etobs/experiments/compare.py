@@ -165,26 +165,35 @@ class Comparison:
         return to_frame(table, {"runs": list(self.runs), "aggregate": list(self.aggregate)})
 
     def table(self) -> list[dict[str, Any]]:
-        """One row per entry: means over the runs that completed, minima of the inter-event times."""
+        """One row per entry, read from :attr:`aggregate` (one computation of the statistics).
+
+        Means over the runs that completed, minima of the inter-event times, and the share
+        of packets not applied (over the whole runs, like ``not_applied``).
+        """
+
+        def value(line: dict[str, Any], key: str) -> float:
+            got = line.get(key)
+            return np.nan if got is None else float(got)
+
         rows = []
-        for e in self.entries:
-            ok = np.array([s == "completed" for s in e.status], dtype=bool)
-            runs = self.spec.initial_states.runs
-            row: dict[str, Any] = {"rule": e.rule, "network": e.network, "completed": f"{ok.sum()}/{runs}"}
-            tx = e.transmissions[ok]
+        runs = self.spec.initial_states.runs
+        for line in self.aggregate:
+            row: dict[str, Any] = {
+                "rule": line["rule"],
+                "network": line["network"],
+                "completed": f"{line['completed']}/{runs}",
+            }
             for c, n in enumerate(self.node_names):
-                row[f"transmissions {n}"] = float(tx[:, c].mean()) if ok.any() else np.nan
-            row["transmissions total"] = float(tx.sum(axis=1).mean()) if ok.any() else np.nan
-            row["error mean"] = float(np.mean(e.error[ok])) if ok.any() else np.nan
-            row["error max"] = float(np.max(e.error[ok])) if ok.any() else np.nan
+                row[f"transmissions {n}"] = value(line, f"transmissions_node{c}_mean")
+            row["transmissions total"] = value(line, "transmissions_mean")
+            row["error mean"] = value(line, "error_mean")
+            row["error max"] = value(line, "error_max")
             for c, n in enumerate(self.node_names):
-                col = e.min_inter_event_time[ok, c]
-                row[f"min inter-event {n}"] = float(np.nanmin(col)) if np.isfinite(col).any() else np.nan
-            if e.not_applied is not None and e.packets is not None and ok.any():
-                sent = e.packets[ok].sum()  # over the whole run, like not_applied
-                row["not applied"] = float(e.not_applied[ok].sum() / sent) if sent else 0.0
-            else:
-                row["not applied"] = np.nan
+                row[f"min inter-event {n}"] = value(line, f"min_inter_event_time_node{c}_min")
+            C = range(len(self.node_names))
+            sent = sum(value(line, f"packets_node{c}_mean") for c in C)
+            lost = sum(value(line, f"not_applied_node{c}_mean") for c in C)
+            row["not applied"] = lost / sent if sent > 0 else (0.0 if sent == 0 else np.nan)
             rows.append(row)
         return rows
 
