@@ -6,6 +6,7 @@ constant wind of 1 and no ``disturbance`` given it said 0.377 while the error re
 ``certify(p, a_U=0.1, disturbance=0.01)`` without ISS gains said "all conditions hold".
 """
 
+import html
 import math
 
 import numpy as np
@@ -119,6 +120,7 @@ def test_a_known_v_is_bounded_and_noted_when_disturbance_is_not_given():
     assert cert.notes == (note,) and cert.disturbance == 1.0
     assert cert.to_dict()["notes"] == [note] and cert.to_dict()["disturbance"] == 1.0
     assert f"note: {note}" in cert.format() and f"  note: {note}" in repr(cert)
+    assert f"<th style='text-align:left'>note</th><td>{html.escape(note)}</td>" in cert._repr_html_()
     assert "for |v| <= 1\n" in cert.format()
     r = simulate(problem, [[0.0, 0.0, 0.0, 0.0]], 40.0, save=SaveAt(grid=np.linspace(0.0, 40.0, 4001)))
     worst = float(max_estimation_error(r, (30.0, 40.0))[0])

@@ -93,7 +93,8 @@ class Certificate:
     disturbance : float
         The bound on ``|v(t)|`` (Euclidean norm of the plant's disturbance input, as it
         enters ``x' = ... + E_v v``) that ``error_bound`` holds for: the one given, or
-        ``sup_t |v(t)|`` of the problem's known ``v`` (``nan`` without an error bound).
+        ``sup_t |v(t)|`` of the problem's known ``v`` (``nan`` when neither is known, and
+        without ISS gains).
 
     """
 
@@ -191,6 +192,7 @@ class Certificate:
         rows += self._figures()
         if self.iss is not None:
             rows.append(("P", self.iss.P_origin or "given by hand"))
+        rows += [("note", n) for n in self.notes]
         body = "".join(
             f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(x)}</td></tr>" for k, x in rows
         )
