@@ -14,7 +14,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any, TypeVar
 
-from etobs._spec import SpecError, check_tree, renamed
+from etobs._spec import TOP, SpecError, check_tree, renamed
 from etobs._spec import keys as _keys
 from etobs._spec import number as _number
 from etobs._validate import shown
@@ -229,7 +229,7 @@ def parse_compare_spec(raw: dict[str, Any], *, folder: str | Path | None = None)
     raw = located(raw, folder)
     required, optional = COMMON_KEYS
     rules = "a non-empty array of tables ([[rules]])"
-    top = _keys("spec", raw, {**required, "rules": rules}, optional | {"networks"})
+    top = _keys(TOP, raw, {**required, "rules": rules}, optional | {"networks"})
     common = parse_common(top, default_name="compare", kwargs_key="params")
     params = common.pop("kwargs")
     rules = _list("rules", top["rules"], _rule)

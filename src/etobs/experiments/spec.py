@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from etobs._spec import SpecError, argument_named, check_tree, in_file, read_toml
+from etobs._spec import TOP, SpecError, argument_named, check_tree, in_file, read_toml
 from etobs._spec import keys as _keys
 from etobs._spec import name as _name
 from etobs._validate import shown
@@ -154,7 +154,7 @@ def parse_spec(raw: dict[str, Any], *, folder: str | Path | None = None) -> Swee
     check_tree(raw)
     raw = located(raw, folder)
     required, optional = COMMON_KEYS
-    top = _keys("spec", raw, required, optional | {"rows", "grid", "scenarios"})
+    top = _keys(TOP, raw, required, optional | {"rows", "grid", "scenarios"})
     common = parse_common(top, default_name="sweep", kwargs_key="fixed")
     fixed = common.pop("kwargs")
     if "rows" in top and "grid" in top:
