@@ -257,7 +257,7 @@ def test_a_failing_chunk_is_reported_and_the_rest_runs(tmp_path, monkeypatch, ca
             r"observer_copy` must be true or false",
         ),
         ({"rules": [{"name": "x", "kind": "static", "eps": "big"}]}, r"`rules\[0\].eps` must be a number"),
-        ({"networks": [{"name": "n", "loss": 2.0}]}, r"`networks\[0\]`: `p` must be <= 1; got 2"),
+        ({"networks": [{"name": "n", "loss": 2.0}]}, r"`networks\[0\]\.loss` must be <= 1; got 2"),
         (
             {"networks": [{"name": "n", "delay": {"gamma": [1, 2]}}]},
             r"unknown key `networks\[0\].delay.gamma`",
@@ -302,12 +302,12 @@ def test_auto_backend_is_decided_per_entry_by_simulate(tmp_path):
 
 def test_rule_errors_at_run_time_name_the_entry_and_node(tmp_path):
     spec = parse_compare_spec({**SPEC, "rules": [{"name": "bad", "kind": "periodic", "period": [0.1, 0.2]}]})
-    with pytest.raises(SpecError, match=r"`rules\['bad'\].period` has 2 values but the problem has 1 nodes"):
+    with pytest.raises(SpecError, match=r"`rules\[0\].period` has 2 values but the problem has 1 nodes"):
         compare(spec, tmp_path, executor="serial")
     rules = [{"name": "fine", "kind": "base"}, {"name": "neg", "kind": "relative", "rho": -1, "eps": 1}]
     spec = parse_compare_spec({**SPEC, "rules": rules})
     ran = []
-    with pytest.raises(SpecError, match=r"`rules\['neg'\]`, node 0: `rho` must be > 0; got -1"):
+    with pytest.raises(SpecError, match=r"`rules\[1\]`, node 0: `rho` must be > 0; got -1"):
         compare(spec, tmp_path, executor="serial", on_entry=ran.append)
     assert ran == []  # every entry is checked before the first one runs
     assert not list((tmp_path / "chunks").glob("*.json"))
