@@ -148,10 +148,10 @@ def _table(key: str, names: Collection[str], *, others_as_they_are: bool = False
         arg = re.match(r"`([A-Za-z_]\w*)(?=[`\[])", msg)
         if arg and arg.group(1) in names:
             raise SpecError(f"`{key}.{msg[1:]}") from exc
-        raise SpecError(msg if msg.startswith(f"`{key}.") else f"`{key}`: {msg}") from exc
-
         if others_as_they_are:
             raise
+        raise SpecError(msg if msg.startswith(f"`{key}.") else f"`{key}`: {msg}") from exc
+
 
 def _load(name: str) -> dict[str, Any]:
     return load_toml(name, PACKAGED, "etobs.design")
@@ -160,9 +160,9 @@ def _load(name: str) -> dict[str, Any]:
 def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, list[str]]:
     """The ISS gains of the spec's observer, its gain ``L``, notes on where ``P`` and ``E_v`` came from."""
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
+    from etobs.design.iss import plant_disturbance_matrix
 
     keys = set(_OBSERVER_KEYS)
-    from etobs.design.iss import plant_disturbance_matrix
     needed = {
         "L": "'design', 'paper' or a matrix",
         "c_v": "a number > 0",
