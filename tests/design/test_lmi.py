@@ -141,3 +141,16 @@ def test_min_gain_on_a_stable_linear_plant_is_no_gain():
     assert g.ok and np.abs(g.L).max() < 1e-6
     fast = observer_gain(chain.A, chain.C, objective="max_decay", max_gain=5.0)
     assert fast.ok and fast.decay_rate > 10 * g.decay_rate
+
+
+def test_a_given_p_uses_the_margin_and_refuses_a_solver():
+    # x' = -x, C = 1, L = 0, P = 1: P A + A' P + Q = -2 + Q, so Q = 2 - 1e-13 holds by 1e-13
+    gain = check_gain([[-1.0]], [[1.0]], [[0.0]], P=[[1.0]], Q=[[2.0 - 1e-13]], margin=1e-3)
+    assert gain.ok  # true, but by less than the margin asked for: said, not hidden
+    assert any("by less than margin = 0.001" in n for n in gain.notes)
+    roomy = check_gain([[-1.0]], [[1.0]], [[0.0]], P=[[1.0]], Q=[[1.0]], margin=1e-3)
+    assert roomy.ok and not any("margin" in n for n in roomy.notes)
+    with pytest.raises(
+        InputError, match=r"`solver` = 'CLARABEL' has no use with `P`: a given P is re-checked"
+    ):
+        check_gain([[-1.0]], [[1.0]], [[0.0]], P=[[1.0]], solver="CLARABEL")

@@ -270,7 +270,8 @@ def check_gain(
         Lyapunov matrix to re-check, symmetric (up to 1e-9 relative; its symmetric part
         is used).
     Q, margin, solver
-        As in :func:`observer_gain`.
+        As in :func:`observer_gain`. With ``P`` no solver runs (``solver`` is refused),
+        and a re-check that holds by less than ``margin`` gets a note.
 
     Returns
     -------
@@ -284,6 +285,10 @@ def check_gain(
     v.real("margin", margin, lower=0.0, lower_open=True)
     n = Am.shape[0]
     if P is not None:
+        if solver is not None:  # no solver runs for a given P: say so rather than ignore it
+            raise InputError(
+                f"`solver` = {solver!r} has no use with `P`: a given P is re-checked with eigenvalues"
+            )
         Pm = v.matrix("P", P, (n, n))
         if np.max(np.abs(Pm - Pm.T)) > 1e-9 * max(1.0, float(np.max(np.abs(Pm)))):
             asym = float(np.max(np.abs(Pm - Pm.T)))
@@ -296,6 +301,12 @@ def check_gain(
                 out,
                 f"the given P does not fit L and Q: P A_cl + A_cl' P + Q has the eigenvalue "
                 f"{out.residuals[worst]:.3g} at vertex {worst} (must be < 0)",
+            )
+        elif out.residuals[worst] >= -margin:  # holds, but closer to 0 than the margin asked for
+            out = _with_notes(
+                out,
+                f"the given P fits L and Q by less than margin = {margin:g}: P A_cl + A_cl' P + Q "
+                f"has the eigenvalue {out.residuals[worst]:.3g} at vertex {worst}",
             )
         return out
     cp = _cvxpy()
