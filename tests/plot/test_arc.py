@@ -209,9 +209,7 @@ def test_eta_of_a_stateless_rule_is_refused():
     nodes = [pb.nodes[0], type(pb.nodes[1])((1,), StaticRule(gamma=pb.nodes[1].rule.gamma, eps=0.01))]
     pb = type(pb)(pb.plant, pb.observer, nodes=nodes, v=pb.v)
     result = simulate(pb, x0=X0[0], t_end=1.0, backend="scipy")
-    with pytest.raises(
-        InputError, match=r"`components` names node 1 \(node1\), whose rule has no state eta"
-    ):
+    with pytest.raises(InputError, match=r"`components` names node 1 \(node1\), whose rule has no state eta"):
         plot_hybrid_arc(result, what="eta", components=[1])
     _, (ax, _) = plot_hybrid_arc(result, what="eta")  # the default: the nodes that have one
     assert len(_flows(ax)) == 1
