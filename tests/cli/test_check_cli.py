@@ -118,6 +118,16 @@ def test_check_refuses_a_problem_the_theorems_do_not_cover(tmp_path, capsys):
 CHAIN = Path(__file__).parents[1] / "design" / "chain.py"
 
 
+def _refused(path, capsys, message):
+    """``etobs check path`` exits 2 with one line matching ``message``, no traceback."""
+    with pytest.raises(SystemExit) as exc:
+        main(["check", path])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert "Traceback" not in err
+
+
 def _chain_design():
     from etobs.design import certify, observer_gain, propose_rules, quadratic_iss_gains
     from tests.design import chain
@@ -198,12 +208,7 @@ def test_check_refuses_a_bad_P(tmp_path, capsys, change, message):
     if change == "P_text":
         text = text.replace(f"P = {gain.P.tolist()}", 'P = "designed"')
     Path(path).write_text(text)
-    with pytest.raises(SystemExit) as exc:
-        main(["check", path])
-    assert exc.value.code == 2
-    err = capsys.readouterr().err
-    assert re.search(message, err), err
-    assert "Traceback" not in err
+    _refused(path, capsys, message)
 
 
 # --- what `disturbance` bounds (issue 15): the wind chain of tests/design/wind_chain.py ------------
@@ -289,12 +294,7 @@ def test_check_takes_the_plant_s_disturbance_matrix_and_says_so(tmp_path, capsys
 )
 def test_check_refuses_a_disturbance_it_cannot_certify(tmp_path, capsys, observer, guarantees, message):
     path, _, _ = _wind_spec(tmp_path, observer=observer, guarantees=guarantees)
-    with pytest.raises(SystemExit) as exc:
-        main(["check", path])
-    assert exc.value.code == 2
-    err = capsys.readouterr().err
-    assert re.search(message, err), err
-    assert "Traceback" not in err
+    _refused(path, capsys, message)
 
 
 def test_check_refuses_a_U_and_disturbance_without_an_observer(tmp_path, capsys):

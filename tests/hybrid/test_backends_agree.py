@@ -124,6 +124,19 @@ def _pulled(t, x, p):
     return np.array([x[1], omega * omega * (target - x[0]) - 2.0 * zeta * omega * x[1]])
 
 
+def _oscillator(params, log_columns=()):
+    """The overdamped oscillator reset below its level, with ``params = (omega, zeta, target, level, d, r)``."""
+    return HybridSystem(
+        n=2,
+        n_rules=1,
+        flow=_pulled,
+        guard=_reaches_level,
+        jump=_reset_below,
+        params=params,
+        log_columns=log_columns,
+    )
+
+
 def _reaches_level(t, x, p):
     return np.array([x[0] - p[3]])
 
@@ -162,15 +175,7 @@ def test_oscillator_jumps_alike_on_engine_and_scipy(omega, zeta, level, d, r, be
     # minimum, then rises monotonically towards the target. The reset puts it at least
     # 0.1 below the level with v <= 0 again, so every crossing of the level is
     # transversal (the speed there is bounded away from zero).
-    system = HybridSystem(
-        n=2,
-        n_rules=1,
-        flow=_pulled,
-        guard=_reaches_level,
-        jump=_reset_below,
-        params=[omega, zeta, 1.0, level, d, r],
-        log_columns=(0, 1),
-    )
+    system = _oscillator([omega, zeta, 1.0, level, d, r], log_columns=(0, 1))
     log = _agree(system, [level - below, v0], OSCILLATOR_HORIZON, _crossing_speed, DENSE_STATE_TOL)
     assert set(log.rule.tolist()) <= {0}
     np.testing.assert_array_equal(log.x[:, 0], level - d)  # the reset position, exactly
@@ -199,15 +204,7 @@ def test_oscillator_slow_crossing_against_closed_form():
     # step pass. At the crossing speed 0.13 that is 1.3e-6 s: far above event_xtol, and
     # within DENSE_X_TOL / speed.
     omega, zeta, level, d, below = 3.0, 3.0, 0.75, 0.8125, 0.125
-    system = HybridSystem(
-        n=2,
-        n_rules=1,
-        flow=_pulled,
-        guard=_reaches_level,
-        jump=_reset_below,
-        params=[omega, zeta, 1.0, level, d, 0.0],
-        log_columns=(0, 1),
-    )
+    system = _oscillator([omega, zeta, 1.0, level, d, 0.0], log_columns=(0, 1))
 
     def reach(e0, v0):
         def g(t):
@@ -236,14 +233,7 @@ def test_engine_dense_output_is_scipys_on_the_same_step():
     # both accept it): equal to rounding (a few ulps: the sums run in another order), so
     # the event times differ only where the backends take different steps.
     omega, zeta, x0, h = 3.0, 3.0, np.array([-0.0625, 0.3]), 0.15
-    system = HybridSystem(
-        n=2,
-        n_rules=1,
-        flow=_pulled,
-        guard=_reaches_level,
-        jump=_reset_below,
-        params=[omega, zeta, 1.0, 10.0, 0.5, 0.0],  # the level is never reached
-    )
+    system = _oscillator([omega, zeta, 1.0, 10.0, 0.5, 0.0])  # the level is never reached
     theta = np.linspace(0.0, 1.0, 21)[1:-1]
     grid = theta * h
     eng = solve(
