@@ -285,7 +285,7 @@ class EstimationResult:
         if not 0 <= run < self.n_runs:
             raise InputError(f"`run` must be in 0..{self.n_runs - 1}; got {run}")
         a = arcs[run]
-        return self._trajectory(a.t, a.j, a.x)
+        return self.trajectory(a.t, a.j, a.x)
 
     def on_grid(self) -> Trajectory:
         """States of every run on the save grid, arrays of shape ``(B, G, ...)``."""
@@ -298,9 +298,15 @@ class EstimationResult:
         if g is None:
             raise InputError("this result kept no grid: simulate with save=SaveAt(grid=...)")
         t = np.broadcast_to(g.t, g.j.shape)
-        return self._trajectory(t, g.j, g.x)
+        return self.trajectory(t, g.j, g.x)
 
-    def _trajectory(self, t: np.ndarray, j: np.ndarray, q: np.ndarray) -> Trajectory:
+    def trajectory(self, t: np.ndarray, j: np.ndarray, q: np.ndarray) -> Trajectory:
+        """Read solver states ``q`` at hybrid times ``(t, j)`` in the paper's terms.
+
+        ``q`` has the solver's state on its last axis (as in ``solution.arcs`` or
+        ``solution.grid``); :meth:`arc` and :meth:`on_grid` are this for what was kept.
+        The one place ``x, z, xhat, ybar, e, eta`` are derived from the solver's state.
+        """
         pb, lay = self.problem, self.problem.layout
         flat = q.reshape(-1, q.shape[-1])
         tf = np.asarray(t, dtype=float).reshape(-1)

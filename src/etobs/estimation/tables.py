@@ -187,6 +187,13 @@ def sent_column_names(result: EstimationResult) -> list[str]:
     )
 
 
+def node_sent_values(result: EstimationResult, log: JumpLog, node: int) -> np.ndarray:
+    """The values node ``node``'s transmissions in ``log`` sent: its own components, in order."""
+    ch = result.problem.layout.channels[node]
+    columns = sent_column_names(result)
+    return sent_values(result, log)[:, [columns.index(f"sent_{ch.kind}{k}") for k in ch.index]]
+
+
 def sent_values(result: EstimationResult, log: JumpLog) -> np.ndarray:
     """The value each transmission of ``log`` sent, one column per ``sent_column_names``.
 

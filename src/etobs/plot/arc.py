@@ -98,7 +98,7 @@ def _estimation_rows(result: EstimationResult, run: int, what: str, components: 
     if result.solution.arcs is None:
         result.arc(run)  # raises, saying how to keep the arcs
     t, j, q, kept = solution_rows(result.solution, run)
-    tr, refined = result._trajectory(t, j, q), kept == "arc+grid"
+    tr, refined = result.trajectory(t, j, q), kept == "arc+grid"
     if what == "error":
         if components is not None:
             raise InputError(

@@ -9,7 +9,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.estimation.result import EstimationResult
-from etobs.estimation.tables import sent_column_names, sent_values
+from etobs.estimation.tables import node_sent_values
 from etobs.model.signals import Zero
 from etobs.plot.arc import solution_rows
 from etobs.plot.figures import _figure, _node_name, _run
@@ -39,7 +39,7 @@ def _measured(result: EstimationResult, t: np.ndarray, j: np.ndarray, q: np.ndar
     is ``u``.
     """
     pb = result.problem
-    tr = result._trajectory(t, j, q)
+    tr = result.trajectory(t, j, q)
     y = tr.ybar - tr.e
     u = pb.u(np.asarray(t, dtype=float)) if pb.input_nodes else None
     return [y[:, ch.index] if ch.kind == "y" else u[:, ch.index] for ch in pb.layout.channels]  # type: ignore[index]
@@ -131,11 +131,10 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     exact = source == "arc" or pb.network is None
     fig, axes = _figure(len(chosen), 1.9 * len(chosen) + 0.8)
     log = result.transmissions.select(run=run)
-    columns = sent_column_names(result)
     for ax, node in zip(axes, chosen, strict=True):
         ch = pb.layout.channels[node]
         sent = log.select(rule=node)
-        values = sent_values(result, sent)[:, [columns.index(f"sent_{ch.kind}{k}") for k in ch.index]]
+        values = node_sent_values(result, sent, node)
         for m, (held_label, measured_label) in enumerate(_labels(result, node)):
             color = f"C{m % 10}"
             ax.plot(t, measured[node][:, m], color=color, lw=0.8, alpha=0.7, label=measured_label)
