@@ -24,6 +24,13 @@ def progress_shown(enabled: bool | None) -> bool:
     return sys.stderr.isatty() if enabled is None else bool(enabled)
 
 
+def progress_write(line: str) -> None:
+    """Print ``line`` on stderr above any progress bar (drawing it again below, not cut)."""
+    from tqdm import tqdm
+
+    tqdm.write(line, file=sys.stderr)
+
+
 def progress_bar(
     total: int, desc: str, *, enabled: bool | None = None, unit: str = "run", initial: int = 0
 ) -> Any:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from etobs._progress import progress_write
 from etobs.cli._args import execution, execution_args, folder, load_toml
 from etobs.experiments.compare import Comparison, EntryResult, compare
 from etobs.experiments.compare_spec import CompareSpec, parse_compare_spec
@@ -54,16 +55,12 @@ def run(args: argparse.Namespace) -> int:
     row = {(r.name, n.name): k + 1 for k, (r, n) in enumerate(spec.entries)}
 
     def report(e: EntryResult) -> None:  # [row of the table / rows]
-        from tqdm import tqdm
-
         ok = sum(s == "completed" for s in e.status)
         others = f" ({not_completed(e.status)})" if ok < len(e.status) else ""
-        # through tqdm, so a progress bar on stderr is redrawn below the line, not cut
-        tqdm.write(
+        progress_write(
             f"[{row[(e.rule, e.network)]}/{spec.n_groups}] {e.rule} / {e.network}: "
             f"{ok}/{spec.initial_states.runs} runs completed{others} "
-            f"in {e.seconds:.1f} s ({e.backend})",
-            file=sys.stderr,
+            f"in {e.seconds:.1f} s ({e.backend})"
         )
 
     result = compare(spec, args.out, on_entry=report, **how)
