@@ -260,7 +260,7 @@ def test_transmissions_stop_when_the_output_stays_in_a_small_ball(eps, sigma, x0
 def test_noise_shortens_tau_and_enters_the_error_bound():
     # section 7.2: |e~| <= E s + 2 m after a transmission, so tau = (gamma^{-1}(eps) - 2 m) / E;
     # the observer's error is e~ + m: lambda = min ell / (2 k), plus sum 2 lambda k m^2 / a_U
-    quiet = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.0])
+    quiet = certify(robot_arm(noise=False), ISS, E=[10.0, 20.0], noise=[0.0, 0.0])
     noisy = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
     assert noisy.nodes[1].tau == pytest.approx((math.sqrt(2) - 0.02) / 20)
     assert noisy.nodes[0].tau == pytest.approx(quiet.nodes[0].tau)
@@ -342,17 +342,23 @@ def test_a_certificate_carries_the_P_and_gains_it_rests_on():
 def test_certificate_repr_is_short_and_names_failures():
     cert = certify(robot_arm(), ISS, E=[10.0, 20.0], noise=[0.0, 0.01])
     lines = repr(cert).splitlines()
-    assert lines[0] == "Certificate: all conditions hold" and len(lines) == 5
+    verdict = "all conditions hold, under the 2 assumptions stated (not checked)"
+    assert lines[0] == f"Certificate: {verdict}" and len(lines) == 7
     assert lines[1] == "  nu = 130, a_U = 0.1719, mu = 768.5, error bound = 1.394e+04, min tau [s] = 0.06971"
     assert lines[2] == f"  rests on ISS gains from P: {GAIN.origin}"
-    # what certify assumed is in the short view too: the arm's v = 0.02 (0, 1, 0, 1) sin(0.4 t)
-    assert lines[3] == (
+    # what was assumed is in the short view too: complete solutions, E as a bound
+    assert lines[3].startswith("  assumed (not checked): solutions are complete")
+    assert lines[4].startswith("  assumed (not checked): E = (10, 20) bounds |dh_i/dx f_p|")
+    # and what certify took from the problem: the arm's v = 0.02 (0, 1, 0, 1) sin(0.4 t)
+    assert lines[5] == (
         "  note: disturbance not given: the error bound is for |v| <= sup_t |v(t)| = 0.0282843, "
         "of problem.v (Sinusoid)"
     )
-    assert lines[4].startswith("  note: with noise:")
+    assert lines[6].startswith("  note: with noise:")
     html = cert._repr_html_()
-    assert html.startswith("<table>") and "<td>all conditions hold</td>" in html and "&#x27;" not in html[:20]
+    assert html.startswith("<table>") and f"<td>{verdict}</td>" in html and "&#x27;" not in html[:20]
+    assert "<th style='text-align:left'>assumed (not checked)</th>" in html
+    assert cert.to_dict()["assumptions"] == list(cert.assumptions) and len(cert.assumptions) == 2
     with pytest.warns(RuntimeWarning, match="Theorem 1 needs"):
         bad = certify(robot_arm(sigma=(600.0, 1200.0)), E=10.0)
     lines = repr(bad).splitlines()

@@ -28,7 +28,9 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.design import hypotheses as hyp
 from etobs.design.iss import QuadraticISS, plant_disturbance_matrix
+from etobs.design.rates import RateEstimate
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.model.functions import Linear, Quadratic
@@ -95,6 +97,11 @@ class Certificate:
         enters ``x' = ... + E_v v``) that ``error_bound`` holds for: the one given, or
         ``sup_t |v(t)|`` of the problem's known ``v`` (``nan`` when neither is known, and
         without ISS gains).
+    assumptions : tuple of str
+        The hypotheses of the theorems that the numbers rest on and that were not
+        checked (completeness of solutions, ``E`` as a bound, Assumption 2 for the rules'
+        own ``gamma_i`` without ISS gains, a design's region, ...): the guarantees hold
+        only where they do. Shown in every view of the certificate.
 
     """
 
@@ -110,6 +117,7 @@ class Certificate:
     notes: tuple[str, ...] = field(default=())
     iss: QuadraticISS | None = None
     disturbance: float = math.nan
+    assumptions: tuple[str, ...] = field(default=())
 
     @property
     def ok(self) -> bool:
@@ -166,6 +174,7 @@ class Certificate:
                 f"ultimate bound on |x - xhat|: {self.error_bound:.6g} for |v| <= {self.disturbance:.6g}"
             )
         lines += _rests_on(self.iss)
+        lines += [f"assumed (not checked): {a}" for a in self.assumptions]
         lines += [f"note: {n}" for n in self.notes]
         lines.append(f"certificate: {self._verdict()}")
         return "\n".join(lines)
@@ -180,6 +189,7 @@ class Certificate:
         lines.append("  " + ", ".join(f"{k} = {x}" for k, x in self._figures()))
         if self.iss is not None:
             lines.append(f"  rests on ISS gains from P: {self.iss.P_origin or 'given by hand'}")
+        lines += [f"  assumed (not checked): {a}" for a in self.assumptions]
         lines += [f"  note: {n}" for n in self.notes]  # what was assumed belongs in the short view too
         return "\n".join(lines)
 
@@ -192,6 +202,7 @@ class Certificate:
         rows += self._figures()
         if self.iss is not None:
             rows.append(("P", self.iss.P_origin or "given by hand"))
+        rows += [("assumed (not checked)", a) for a in self.assumptions]
         rows += [("note", n) for n in self.notes]
         body = "".join(
             f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(x)}</td></tr>" for k, x in rows
@@ -199,11 +210,12 @@ class Certificate:
         return f"<table>{body}</table>"
 
     def _verdict(self) -> str:
-        return (
-            "all conditions hold"
-            if self.ok
-            else f"{len(self.failures())} of {len(self.conditions)} conditions fail"
-        )
+        if not self.ok:
+            return f"{len(self.failures())} of {len(self.conditions)} conditions fail"
+        if not self.assumptions:
+            return "all conditions hold"
+        n = len(self.assumptions)
+        return f"all conditions hold, under the {n} assumption{'s' if n > 1 else ''} stated (not checked)"
 
     def _figures(self) -> list[tuple[str, str]]:
         """The guaranteed numbers that are defined, formatted: ``nu``, ``a_U``, ``mu``, the bound, ``tau``."""
@@ -299,14 +311,8 @@ def certify(
     ds = None if d is None else [v.real(f"d[{i}]", di, lower=0.0, lower_open=True) for i, di in enumerate(d)]
     if ds is not None and len(ds) != N:
         raise InputError(f"`d` must have one value per node ({N}); got {len(ds)}")
-    Es = None
-    if E is not None:
-        Es = [v.real(f"E[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(_per_node(E, N))]
-        if len(Es) != N:
-            raise InputError(f"`E` must be one bound or one per node ({N}); got {len(Es)}")
-    if noise is not None and len(noise) != N:
-        raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
-    ms = [0.0] * N if noise is None else [v.real(f"noise[{i}]", x, lower=0.0) for i, x in enumerate(noise)]
+    Es, E_said = _rate_bound(E, N)
+    ms, noise_said = _noise_bounds(problem, noise)
     conds: list[Condition] = []
     nodes = []
     nu = nu_inf = 0.0
@@ -323,22 +329,32 @@ def certify(
             nu_inf += r.eps / (1 - sc)
         else:  # no d_i can satisfy Theorem 1
             d_star = di = delta = nu = nu_inf = math.nan
-        # Theorem 4; with noise the gap the rule sees restarts at 0 but |e~| <= E s + 2 m,
+        # Theorem 4 needs gamma_i^{-1}(eps_i) at the first crossing, and gamma_i of class K up to it
+        s_eps = hyp.first_crossing(r.gamma, r.eps)
+        conds += _class_k(r, s_eps, i)
+        # with noise the gap the rule sees restarts at 0 but |e~| <= E s + 2 m,
         # so it needs (gamma^{-1}(eps) - 2 m) / E (section 7.2's semi-global version)
-        reach = float(r.gamma.inverse(r.eps)) - 2 * ms[i]
+        reach = s_eps - 2 * ms[i]
         tau = reach / Es[i] if Es is not None and reach > 0 else math.nan
         nodes.append(NodeNumbers(i, sigma, c, r.eps, sc, d_star, di, delta, tau))
-        if noise is not None:
-            g2m = float(r.gamma(2 * ms[i]))
+        if ms[i] > 0:
+            g2m = float(r.gamma(np.array(2 * ms[i])))
             conds.append(
                 Condition(
                     "eps > gamma(2 m) (section 7.2)",
                     r.eps > g2m,
-                    f"eps = {r.eps:g}, gamma(2m) = {g2m:.6g}",
+                    f"eps = {r.eps:g}, gamma(2m) = {g2m:.6g} with m = {ms[i]:.6g}",
                     i,
                 )
             )
-    out = Certificate(conditions=tuple(conds), nodes=tuple(nodes), nu=nu, nu_inf=nu_inf)
+    assumed = [_COMPLETE] + ([E_said] if E_said else [])
+    out = Certificate(
+        conditions=tuple(conds),
+        nodes=tuple(nodes),
+        nu=nu,
+        nu_inf=nu_inf,
+        notes=tuple(n for n in [noise_said] if n),
+    )
     if iss is None:
         unused = {k: x for k, x in (("a_U", a_U), ("disturbance", disturbance)) if x is not None}
         if unused:  # dropping them would certify without what was asked
@@ -348,13 +364,109 @@ def certify(
                 f"error bound, which rest on the observer's ISS gains; got {got} without `iss` (pass the "
                 "gains, e.g. quadratic_iss_gains(...), or leave them out)"
             )
-        return out
+        return replace(out, assumptions=(_ASSUMPTION_2, *assumed))
     if not isinstance(iss, QuadraticISS):
         raise InputError(f"`iss` must be a QuadraticISS; got {type(iss).__name__}")
     notes = _disturbance_input(problem, iss)
     bound, note = _disturbance_bound(problem, disturbance)
-    out = replace(out, notes=tuple(notes + ([note] if note else [])))
-    return replace(_with_iss(out, rules, iss, a_U, bound, ms), disturbance=bound)
+    tied, how = hyp.tie_gains(problem, iss)
+    conds.append(Condition("ISS gains are the problem's observer and plant (Assumption 2)", tied, how))
+    if iss.region is not None:
+        assumed.append(
+            f"x and xhat stay in the region {iss.region} where the design's slope bounds hold (the ISS "
+            "gains and every number here rest on it; etobs.design.runs_leaving(result, region) finds "
+            "the runs that leave)"
+        )
+    out = replace(out, conditions=tuple(conds), notes=(*out.notes, *notes, *([note] if note else [])))
+    out = _with_iss(out, rules, iss, a_U, bound, ms)
+    return replace(out, disturbance=bound, assumptions=tuple(assumed))
+
+
+#: Stated on every certificate: the theorems speak of complete solutions (Proposition 2 proves
+#: completeness under Assumption 3, forward completeness of the plant, which is not checked).
+_COMPLETE = (
+    "solutions are complete (the theorems speak of complete solutions; Assumption 3, the plant's "
+    "forward completeness, gives it and is not checked)"
+)
+#: Stated without ISS gains (Remark 1): the rules' gamma_i are then taken as the observer's.
+_ASSUMPTION_2 = (
+    "Assumption 2 holds with the rules' own gamma_i (no ISS gains given: Remark 1 needs the observer's "
+    "gain gamma_i to be O of the rule's; pass iss= to check it and get an error bound)"
+)
+
+
+def _rate_bound(E: Any, N: int) -> tuple[list[float] | None, str]:
+    """``E_i`` per node (or ``None``), and the assumption ``tau_i`` then rests on, in words."""
+    if E is None:
+        return None, ""
+    if isinstance(E, RateEstimate):
+        if len(E.E) != N:
+            raise InputError(f"`E` estimates the rate of {len(E.E)} nodes; the problem has {N}")
+        shown_E = ", ".join(f"{x:.6g}" for x in E.E)
+        return list(E.E), (
+            f"E = ({shown_E}) is an estimate, not a bound: {E.how}; tau_i is a minimum inter-event time only "
+            "along solutions whose output rate |dy_i/dt| stays below E_i"
+        )
+    Es = [v.real(f"E[{i}]", x, lower=0.0, lower_open=True) for i, x in enumerate(_per_node(E, N))]
+    if len(Es) != N:
+        raise InputError(f"`E` must be one bound or one per node ({N}); got {len(Es)}")
+    shown_E = ", ".join(f"{x:.6g}" for x in Es)
+    return Es, (
+        f"E = ({shown_E}) bounds |dh_i/dx f_p| along every solution (given as a bound; tau_i holds "
+        "where it does)"
+    )
+
+
+def _noise_bounds(problem: EstimationProblem, noise: Sequence[float] | None) -> tuple[list[float], str]:
+    """``m_i`` per node (section 7.2) read from ``problem.m``, or the given ``noise`` checked against it.
+
+    Without it a noisy problem was certified as noise-free: lambda not halved and
+    ``tau`` too large (0.039 s certified, 0.011 s observed).
+    """
+    N = problem.n_nodes
+    sups = [_sup_norm(problem.m, list(nd.outputs)) for nd in problem.nodes]
+    what = type(problem.m).__name__
+    if noise is None:
+        if any(m is None for m in sups):
+            raise InputError(
+                f"problem.m is a function ({what}), which certify cannot bound: give `noise`, a bound m_i on "
+                "each node's measurement noise (section 7.2)"
+            )
+        ms = [float(m) for m in sups]  # type: ignore[arg-type]
+        said = ", ".join(f"{m:.6g}" for m in ms)
+        return ms, (
+            f"noise not given: m_i = sup_t |m_i(t)| = ({said}) of problem.m ({what})" if any(ms) else ""
+        )
+    if len(noise) != N:
+        raise InputError(f"`noise` must have one bound per node ({N}); got {len(noise)}")
+    ms = [v.real(f"noise[{i}]", x, lower=0.0) for i, x in enumerate(noise)]
+    for i, (m, sup) in enumerate(zip(ms, sups, strict=True)):
+        if sup is not None and m < sup * (1 - 1e-12):
+            raise InputError(
+                f"`noise[{i}]` = {m:g} is below sup_t |m_{i}(t)| = {sup:.6g} of the problem's m ({what}): "
+                f"tau and the error bound would not hold for this problem; give noise[{i}] >= {sup:.6g}, "
+                "or leave `noise` out to use it"
+            )
+    if any(m is None for m in sups):
+        return (
+            ms,
+            f"noise = {ms} is taken as a bound on |m_i(t)|; problem.m is a function ({what}), not checked",
+        )
+    return ms, ""
+
+
+def _class_k(rule: Any, s_eps: float, i: int) -> list[Condition]:
+    """``gamma_i`` and ``alpha_i`` of class K∞ (Assumption 2, eq. (14)), probed unless built in.
+
+    Theorem 4 needs ``gamma_i`` increasing up to its first crossing of ``eps_i`` (dense
+    there); Theorems 1-2 need class K∞ (a log-spaced tail beyond).
+    """
+    ok, how = hyp.probe_class_k(rule.gamma, max(s_eps, 1e-12))
+    out = [Condition("gamma_i of class K-infinity (Assumption 2, Theorem 4)", ok, how, i)]
+    if isinstance(rule, DynamicRule):
+        ok, how = hyp.probe_class_k(rule.alpha, 1.0)
+        out.append(Condition("alpha_i of class K-infinity (eq. (14))", ok, how, i))
+    return out
 
 
 def _disturbance_input(problem: EstimationProblem, iss: QuadraticISS) -> list[str]:
@@ -428,19 +540,20 @@ def _disturbance_bound(problem: EstimationProblem, disturbance: float | None) ->
     return d, ""
 
 
-def _sup_norm(signal: Signal) -> float | None:
-    """``sup_t |v(t)|`` (Euclidean norm) of a known signal; ``None`` for a function.
+def _sup_norm(signal: Signal, rows: list[int] | None = None) -> float | None:
+    """``sup_t |v(t)|`` (Euclidean norm of the components ``rows``) of a known signal, else ``None``.
 
     For a sinusoid ``a sin(w t + p) + o`` the norm is convex in ``s = sin(w t + p)``, so
     its sup over ``s`` in ``[-1, 1]`` is at ``s = +-1`` (``Sinusoid.bound``, which sums
     ``|a| + |o|`` per component, is larger and would refuse valid values).
     """
+    pick = slice(None) if rows is None else rows
     if isinstance(signal, Zero):
         return 0.0
     if isinstance(signal, Constant):
-        return float(np.linalg.norm(signal.value))
+        return float(np.linalg.norm(np.asarray(signal.value)[pick]))
     if isinstance(signal, Sinusoid):
-        a, o = np.asarray(signal.amplitude), np.asarray(signal.offset)
+        a, o = np.asarray(signal.amplitude)[pick], np.asarray(signal.offset)[pick]
         if signal.omega == 0:  # s = sin(phase) for all t
             return float(np.linalg.norm(a * math.sin(signal.phase) + o))
         return float(max(np.linalg.norm(o + a), np.linalg.norm(o - a)))
@@ -490,12 +603,21 @@ def _per_node(value: Any, n: int) -> list[Any]:
 
 
 def _rules(problem: EstimationProblem) -> list[Any]:
+    """The nodes' rules, refused unless each is exactly the paper's rule (eq. (16)-(17)).
+
+    A subclass of :class:`DynamicRule` that changes its trigger was certified as the
+    paper's rule before (simulated error 3.18 against a bound of 0.348): only the two
+    classes themselves are accepted, never through ``isinstance``.
+    """
     rules = []
     for i, nd in enumerate(problem.nodes):
-        if not isinstance(nd.rule, DynamicRule | StaticRule):
+        kind = type(nd.rule)
+        if kind not in (DynamicRule, StaticRule):
+            sub = [b.__name__ for b in (DynamicRule, StaticRule) if isinstance(nd.rule, b)]
+            what = f"a subclass of {sub[0]}, which may change the rule" if sub else "another rule"
             raise InputError(
-                f"the theorems cover DynamicRule and StaticRule; node {i} ({nd.name!r}) has a "
-                f"{type(nd.rule).__name__}"
+                f"the theorems cover the paper's rule, DynamicRule or StaticRule itself; node {i} "
+                f"({nd.name!r}) has a {kind.__name__} ({what}): no certificate is given for it"
             )
         rules.append(nd.rule)
     return rules
@@ -515,7 +637,7 @@ def _with_iss(
     cert = replace(cert, iss=iss)
     conds = list(cert.conditions)
     notes = list(cert.notes)
-    quad = all(isinstance(r.gamma, Quadratic) for r in rules)
+    quad = all(type(r.gamma) is Quadratic for r in rules)  # a subclass may change the formula
     # With noise the observer's error is e~ + m, and k |e~ + m|^2 <= 2 k |e~|^2 + 2 k m^2:
     # the rule's gain must then dominate 2 lambda k_i, and 2 lambda k_i m_i^2 is added.
     two = 2.0 if any(m > 0 for m in ms) else 1.0
@@ -529,7 +651,7 @@ def _with_iss(
             else "a rule gamma is not quadratic",
         )
     )
-    linear = all(isinstance(r.alpha, Linear) for r in rules if isinstance(r, DynamicRule))
+    linear = all(type(r.alpha) is Linear for r in rules if isinstance(r, DynamicRule))
     if not (quad and linear):
         notes.append("Theorem 2 needs linear alpha_i and quadratic gamma_i: not applied")
         return replace(cert, conditions=tuple(conds), scale=scale, notes=tuple(notes))

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.design.hypotheses import Region
 from etobs.design.lmi import ObserverGain
 from etobs.errors import InputError
 from etobs.model.plant import Plant
@@ -59,6 +60,13 @@ class QuadraticISS:
         The disturbance input matrix ``theta`` was computed for (``x' = ... + E_v v``);
         ``None`` for gains given by hand, whose ``theta`` :func:`~etobs.design.certify`
         then takes on trust (with a note).
+    L, Q : ndarray, optional
+        The observer gain and decrease matrix the gains were computed from
+        (:class:`~etobs.design.ObserverGain`); :func:`~etobs.design.certify` ties them
+        to the problem's observer and plant. ``None`` for gains given by hand, which it
+        then states as assumed.
+    region : Region, optional
+        Where the design's slope bounds hold (``None``: everywhere); stated by certificates.
 
     """
 
@@ -72,6 +80,9 @@ class QuadraticISS:
     c_v: float = math.nan
     c: tuple[float, ...] = ()
     E_v: np.ndarray | None = field(default=None, compare=False)
+    L: np.ndarray | None = field(default=None, compare=False)
+    Q: np.ndarray | None = field(default=None, compare=False)
+    region: Region | None = None
 
     def __post_init__(self) -> None:
         v.real("a", self.a, lower=0.0, lower_open=True)
@@ -95,6 +106,11 @@ class QuadraticISS:
             E_v = np.array(v.matrix("E_v", self.E_v, (rows, None)))
             E_v.setflags(write=False)
             object.__setattr__(self, "E_v", E_v)
+        for name in ("L", "Q"):  # read-only, as P: the gains rest on them
+            if getattr(self, name) is not None:
+                arr = np.array(v.matrix(name, getattr(self, name), (None, None)))
+                arr.setflags(write=False)
+                object.__setattr__(self, name, arr)
 
     @property
     def n_nodes(self) -> int:
@@ -200,6 +216,9 @@ def quadratic_iss_gains(
         c_v=float(c_v),
         c=tuple(cs),
         E_v=E_v,
+        L=gain.L,
+        Q=gain.Q,
+        region=gain.region,
     )
 
 

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.design.hypotheses import Region
 from etobs.errors import DesignError, InputError
 
 #: Objectives of :func:`observer_gain`.
@@ -57,6 +58,11 @@ class ObserverGain:
     origin : str
         How ``P`` was found, in words (shown by certificates that rest on it: the
         guarantees depend on ``P``, and ``L`` admits many).
+    region : Region or None
+        Where the slope bounds of the vertices hold (``None``: everywhere). The
+        decrease, and every guarantee built on it, holds only while ``x`` and ``xhat``
+        stay in it; certificates state it and :func:`~etobs.design.runs_leaving` finds
+        the simulated runs that leave it.
 
     """
 
@@ -70,6 +76,7 @@ class ObserverGain:
     margin: float
     notes: tuple[str, ...] = field(default=())
     origin: str = ""
+    region: Region | None = None
 
     @property
     def ok(self) -> bool:
@@ -135,6 +142,7 @@ def observer_gain(
     objective: str = "min_gain",
     max_gain: float | None = None,
     solver: str | None = None,
+    region: Region | None = None,
 ) -> ObserverGain:
     """Design ``L`` from the polytopic LMIs (a plain Luenberger design without vertices).
 
@@ -161,6 +169,10 @@ def observer_gain(
         Bound on ``||W||_2`` (and so on ``||L||_2``); required with ``"max_decay"``.
     solver : str, optional
         cvxpy solver name (default: Clarabel, else SCS).
+    region : Region, optional
+        Where the slope bounds of ``vertices`` hold, when not everywhere (``x_1^3``
+        has slope in ``[0, 12]`` only on ``|x_1| <= 2``): recorded on the result, stated
+        by certificates, checked on runs by :func:`~etobs.design.runs_leaving`.
 
     Returns
     -------
@@ -194,7 +206,8 @@ def observer_gain(
     while True:
         out = _design(cp, Am, Cm, verts, Qm, mu, objective, max_gain, solver)
         if out.ok:
-            return replace(out, origin=f"designed together with L by observer_gain (objective {objective!r})")
+            origin = f"designed together with L by observer_gain (objective {objective!r})"
+            return replace(out, origin=origin, region=_region(region, Am.shape[0]))
         if mu * 10 > cap:
             break
         mu *= 10
@@ -250,6 +263,7 @@ def check_gain(
     Q: Any = None,
     margin: float = 1e-6,
     solver: str | None = None,
+    region: Region | None = None,
 ) -> ObserverGain:
     """Whether a given ``L`` satisfies the LMIs, for a given ``P`` or for some ``P``.
 
@@ -272,6 +286,8 @@ def check_gain(
     Q, margin, solver
         As in :func:`observer_gain`. With ``P`` no solver runs (``solver`` is refused),
         and a re-check that holds by less than ``margin`` gets a note.
+    region : Region, optional
+        As in :func:`observer_gain`: where the slope bounds of ``vertices`` hold.
 
     Returns
     -------
@@ -283,6 +299,20 @@ def check_gain(
     Am, Cm, verts, Qm = _system(A, C, vertices, Q)
     Lm = v.matrix("L", L, (Am.shape[0], Cm.shape[0]))
     v.real("margin", margin, lower=0.0, lower_open=True)
+    return replace(_check(Am, Cm, verts, Qm, Lm, P, margin, solver), region=_region(region, Am.shape[0]))
+
+
+def _check(
+    Am: np.ndarray,
+    Cm: np.ndarray,
+    verts: tuple[np.ndarray, ...],
+    Qm: np.ndarray,
+    Lm: np.ndarray,
+    P: Any,
+    margin: float,
+    solver: str | None,
+) -> ObserverGain:
+    """:func:`check_gain` on validated matrices."""
     n = Am.shape[0]
     if P is not None:
         if solver is not None:  # no solver runs for a given P: say so rather than ignore it
@@ -389,6 +419,17 @@ def _recheck(
         margin=margin,
         notes=notes,
     )
+
+
+def _region(region: Region | None, n_x: int) -> Region | None:
+    """``region`` checked to be a :class:`Region` of ``n_x`` components (or ``None``)."""
+    if region is None:
+        return None
+    if not isinstance(region, Region):
+        raise InputError(f"`region` must be a Region (etobs.design.Region); got {type(region).__name__}")
+    if region.low.size != n_x:
+        raise InputError(f"`region` must bound the {n_x} plant states; got {region.low.size} components")
+    return region
 
 
 def _with_notes(gain: ObserverGain, note: str) -> ObserverGain:
