@@ -312,3 +312,42 @@ def test_check_refuses_a_U_and_disturbance_without_an_observer(tmp_path, capsys)
         in err
     )
     assert "add `[observer]` or remove `guarantees.a_U` and `guarantees.disturbance`" in err
+
+
+def test_check_fails_when_the_system_s_L_is_not_the_observer_s(tmp_path, capsys):
+    # before: exit 0, the ISS gains of observer.L certified for a problem run with another L
+    other = "params = { L = [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]], sigma = [600.0, 800.0], "
+    text = SPEC.format(sigma2=800.0).replace("params = { sigma = [600.0, 800.0], ", other)
+    (tmp_path / "check.toml").write_text(text)
+    assert main(["check", str(tmp_path / "check.toml")]) == 1
+    err = capsys.readouterr().err
+    assert "etobs: condition failed: ISS gains are the problem's observer and plant (Assumption 2)" in err
+    assert "the observer's response to ybar is not the L of the ISS gains" in err
+
+
+@pytest.mark.parametrize("runs", ["1e7", "1e8", "10000000", "100000000"])
+def test_check_refuses_an_E_estimate_above_the_limit_before_any_run(tmp_path, capsys, runs):
+    # before: 1e7 ran for minutes without a word, 1e8 ended in a MemoryError traceback
+    extra = f"E_estimate = {{ low = [0, 0, 0, 0], high = [20, 10, 20, 10], runs = {runs} }}\n"
+    text = SPEC.format(sigma2=800.0).replace("E = [10.0, 20.0]\n", extra)
+    (tmp_path / "check.toml").write_text(text)
+    if "e" in runs:  # TOML floats: refused as not an integer, before any run
+        _refused(str(tmp_path / "check.toml"), capsys, r"`guarantees.E_estimate.runs` must be an integer")
+        return
+    _refused(
+        str(tmp_path / "check.toml"),
+        capsys,
+        rf"^etobs: error: \S+: `guarantees.E_estimate.runs` = {runs} \(plus 16 corners\) over t_end = 30 "
+        r"asks for [0-9.e+]+ grid points [^\n]*; the limit is 5e\+06: lower runs or t_end\n$",
+    )
+
+
+@pytest.mark.slow
+def test_packaged_robot_arm_names_E_as_an_estimate_from_the_box_and_its_corners(capsys):
+    assert main(["check", "robot_arm"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "assumed (not checked): E = (" in out
+        and ") is an estimate, not a bound: the largest |dy_i/dt|" in out
+    )
+    assert "and its 16 corners" in out and "stays below E_i" in out
