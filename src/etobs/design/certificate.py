@@ -99,9 +99,10 @@ class Certificate:
         without ISS gains).
     assumptions : tuple of str
         The hypotheses of the theorems that the numbers rest on and that were not
-        checked (completeness of solutions, ``E`` as a bound, Assumption 2 for the rules'
-        own ``gamma_i`` without ISS gains, a design's region, ...): the guarantees hold
-        only where they do. Shown in every view of the certificate.
+        checked: complete solutions (Assumption 3), ``E`` as a bound or an estimate,
+        a design's region;
+        without ISS gains, Assumption 2 for the rules' own ``gamma_i`` (Remark 1).
+        The guarantees hold only where they do. Shown in every view of the certificate.
 
     """
 
@@ -382,7 +383,7 @@ def certify(
     return replace(out, disturbance=bound, assumptions=tuple(assumed))
 
 
-#: Stated on every certificate: the theorems speak of complete solutions (Proposition 2 proves
+#: Stated on every certificate: the theorems speak of complete solutions (Theorem 3 proves
 #: completeness under Assumption 3, forward completeness of the plant, which is not checked).
 _COMPLETE = (
     "solutions are complete (the theorems speak of complete solutions; Assumption 3, the plant's "
@@ -456,7 +457,7 @@ def _noise_bounds(problem: EstimationProblem, noise: Sequence[float] | None) -> 
 
 
 def _class_k(rule: Any, s_eps: float, i: int) -> list[Condition]:
-    """``gamma_i`` and ``alpha_i`` of class K∞ (Assumption 2, eq. (14)), probed unless built in.
+    """``gamma_i`` and ``alpha_i`` of class K∞, probed unless built in (``alpha_i``: eq. (14)).
 
     Theorem 4 needs ``gamma_i`` increasing up to its first crossing of ``eps_i`` (dense
     there); Theorems 1-2 need class K∞ (a log-spaced tail beyond).
