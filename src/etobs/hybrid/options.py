@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -166,6 +167,27 @@ class SaveAt:
         if pairs.min() < 0 or pairs.max() >= n:
             raise InputError(f"`max_distance` indices must lie in 0 .. {n - 1} (the state size); got {d!r}")
         return pairs
+
+
+def beyond_step_limit(span: float, options: SolverOptions, *, t_end: str = "t_end", solver: str = "") -> str:
+    """Why a run over a horizon of length ``span`` cannot end before ``max_steps``; ``""`` if it may.
+
+    A run takes at least ``span / max_step`` steps, so when that is more than
+    ``max_steps`` every run would stop with status ``max_steps`` after its whole step
+    budget: the work is refused before it is spent. ``t_end`` and ``solver`` (a prefix
+    of ``max_step``, ``max_steps``) spell the settings as the caller's input does, e.g.
+    ``"horizon.t_end"`` and ``"solver."`` for a spec.
+    """
+    fewest = span / options.max_step
+    if fewest <= options.max_steps:
+        return ""
+    step, steps = f"{solver}max_step", f"{solver}max_steps"
+    count = f"{math.ceil(fewest)}" if fewest < 1e12 else f"{fewest:.3g}"
+    return (
+        f"`{t_end}` = {span:g} needs at least {count} steps at `{step}` = {options.max_step:g}, "
+        f"more than `{steps}` = {options.max_steps} (every run would stop with status max_steps); "
+        f"raise `{steps}` or `{step}`, or shorten the horizon"
+    )
 
 
 def checked_options(options: Any) -> SolverOptions:
