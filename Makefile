@@ -26,6 +26,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_accuracy.py --quick
 	$(BIN)/python benchmarks/bench_user_model.py --quick
 	$(BIN)/python benchmarks/bench_extensions.py --quick
+	$(BIN)/python benchmarks/bench_model_cost.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -38,6 +39,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_accuracy.py --runs 30 --rtol 1e-10 1e-9 1e-8
 	$(BIN)/python benchmarks/bench_user_model.py
 	$(BIN)/python benchmarks/bench_extensions.py
+	$(BIN)/python benchmarks/bench_model_cost.py
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis

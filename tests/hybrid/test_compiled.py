@@ -16,6 +16,7 @@ from etobs.errors import InputError, InputTypeError, ModelError
 from etobs.hybrid import HybridSystem, SaveAt, SolverOptions, Status, _kernel, solve
 from etobs.hybrid import compiled as comp
 from etobs.hybrid.compiled import CompiledSystem, compile_system, solve_compiled
+from etobs.hybrid.options import MAX_STEPS
 
 from .systems import G, bouncing_ball, grazing_oscillator
 
@@ -245,3 +246,89 @@ def test_bad_inputs_are_named(ball):
     with pytest.raises(InputError, match="`n`"):
         compile_system(lambda t, x: x, lambda t, x: x, lambda k, t, x: x, n=0, n_rules=1)
     assert isinstance(ball, CompiledSystem)
+
+
+# ---- silent cost: limits and progress by simulated time (issue 23, section 3) ------------
+
+
+@pytest.fixture(scope="module")
+def clock():
+    """``x' = 1`` without rules: the error estimate is zero, so only ``max_step`` bounds the steps."""
+    return compile_system(
+        lambda t, x: np.ones(1), lambda t, x: np.full(1, -1.0), lambda k, t, x: x, n=1, n_rules=0
+    )
+
+
+@pytest.fixture(scope="module")
+def spring():
+    """``x'' = -x`` without rules: steps of a fixed size however long the horizon."""
+    return compile_system(
+        lambda t, x: np.array([x[1], -x[0]]),
+        lambda t, x: np.full(1, -1.0),
+        lambda k, t, x: x,
+        n=2,
+        n_rules=0,
+    )
+
+
+@pytest.mark.parametrize(
+    ("t_end", "options"),
+    [(1e300, SolverOptions()), (1.0, SolverOptions(max_step=1e-12))],
+    ids=["t_end=1e300", "max_step=1e-12"],
+)
+def test_a_runaway_run_ends_at_the_default_step_limit_with_a_status_naming_it(spring, t_end, options):
+    # issue 23: t_end=1e300 or max_step=1e-12 ran 10,000,000 steps (the robot arm: 107 s
+    # for max_step=1e-12, several minutes for t_end=1e300) before a word; the default now
+    # stops it at 2,000,000 (about 20 s of the robot arm) with status max_steps
+    assert SolverOptions().max_steps == MAX_STEPS == 2_000_000
+    sol = solve_compiled(spring, [1.0, 0.0], (0.0, t_end), options=options, save=SaveAt(steps=False))
+    assert sol.status.tolist() == [Status.MAX_STEPS]
+    assert int(sol.n_steps[0] + sol.n_rejected[0]) == 2_000_000
+    assert sol.t_final[0] < t_end
+    assert "increase `SolverOptions(max_steps=...)`" in sol.messages()[0]
+
+
+def test_the_step_limit_is_exact_on_both_sides(clock):
+    # 1 s at max_step = 0.125 takes 8 steps: a run that needs max_steps steps completes,
+    # one that needs one more stops with max_steps
+    opts = {"max_step": 0.125, "first_step": 0.125}
+    for limit, status in ((9, Status.COMPLETED), (8, Status.COMPLETED), (7, Status.MAX_STEPS)):
+        sol = solve_compiled(clock, [0.0], (0.0, 1.0), options=SolverOptions(max_steps=limit, **opts))
+        assert sol.status.tolist() == [status], limit
+        assert sol.n_steps.tolist() == [min(limit, 8)]
+
+
+def test_progress_reports_the_simulated_time_of_a_single_run(clock, monkeypatch):
+    # issue 23: a single long run showed nothing until it ended (the engine reported whole
+    # runs only); it now reports the time reached while the run goes on
+    monkeypatch.setattr(comp, "POLL", 1e-3)
+    opts = SolverOptions(max_step=2e-6, first_step=2e-6)  # 500,000 steps
+    calls = []
+    sol = solve_compiled(
+        clock, [0.0], (0.0, 1.0), options=opts, save=SaveAt(steps=False), progress=calls.append
+    )
+    plain = solve_compiled(clock, [0.0], (0.0, 1.0), options=opts, save=SaveAt(steps=False))
+    done = np.cumsum(calls)
+    assert sol.ok and done[-1] == pytest.approx(1.0, rel=1e-12)
+    assert np.any((done > 0.0) & (done < 1.0))  # a report while the run was going on
+    assert all(c > 0 for c in calls)
+    np.testing.assert_array_equal(sol.x_final, plain.x_final)
+    np.testing.assert_array_equal(sol.n_steps, plain.n_steps)
+
+
+def test_progress_counts_a_run_that_stops_early_as_done(clock):
+    # a run stopped by a limit reports its whole share: the calls sum to B
+    calls = []
+    opts = SolverOptions(max_steps=10)
+    sol = solve_compiled(clock, np.zeros((3, 1)), (-5.0, 1e300), options=opts, progress=calls.append)
+    assert sol.status.tolist() == [Status.MAX_STEPS] * 3
+    assert sum(calls) == pytest.approx(3.0, rel=1e-12)
+
+
+def test_an_exception_in_the_watched_solve_reaches_the_caller(ball, monkeypatch):
+    def broken(*args):
+        raise RuntimeError("kernel gone")
+
+    monkeypatch.setattr(comp, "_call", broken)
+    with pytest.raises(RuntimeError, match="kernel gone"):
+        solve_compiled(ball, X0, (0.0, 1.0), params=[0.8, G], progress=lambda k: None)

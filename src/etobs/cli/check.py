@@ -68,6 +68,11 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser("check", help="certificate of a design: the theorems' conditions and guarantees")
     p.add_argument("spec", metavar="SPEC", help=f"TOML file, or a packaged spec: {', '.join(PACKAGED)}")
     p.add_argument("--json", action="store_true", help="print the certificate as JSON")
+    p.add_argument(
+        "--cost",
+        action="store_true",
+        help="print what the model costs on the engine: each function's time per call, slow ones named",
+    )
     p.set_defaults(func=run)
 
 
@@ -81,6 +86,11 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(params, dict):
         raise SpecError(f"`system.params` must be a table; got {shown(params)}")
     problem = make_problem(system["factory"], params, "system.params")
+    if args.cost:  # etobs.estimation.model_cost: the model alone, no certificate
+        from etobs.estimation.cost import model_cost
+
+        print(model_cost(problem))
+        return 0
     iss, obs_notes = None, []
     if "observer" in top:
         with _table("observer", _OBSERVER_KEYS):

@@ -1,5 +1,6 @@
 """The paper's event-triggered estimator assembled as a hybrid system, its simulation and metrics."""
 
+from etobs.estimation.cost import ModelCost, model_cost
 from etobs.estimation.metrics import (
     input_transmission_counts,
     inter_event_times,
@@ -14,12 +15,14 @@ from etobs.estimation.simulate import simulate
 __all__ = [
     "EstimationProblem",
     "EstimationResult",
+    "ModelCost",
     "StateLayout",
     "Trajectory",
     "input_transmission_counts",
     "inter_event_times",
     "max_estimation_error",
     "min_inter_event_time",
+    "model_cost",
     "simulate",
     "transmission_counts",
 ]

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs._progress import progress_bar, progress_shown
+from etobs._progress import horizon_bar, progress_shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
@@ -70,9 +70,11 @@ def simulate(
         ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
         not depend on how the sweep was chunked.
     progress : bool or None
-        A progress bar on stderr counting the runs done: ``None`` (default) shows it when
-        stderr is a terminal and the batch takes more than a second; ``True`` or
-        ``False`` force it on or off.
+        A progress bar on stderr by simulated time (:func:`etobs._progress.horizon_bar`:
+        the runs' mean time reached and the wall time left, so a single long run shows
+        too): ``None`` (default) shows it when stderr is a terminal and the solve takes
+        more than a second; ``True`` or ``False`` force it on or off. On the engine the
+        time advances every 0.2 s; the scipy reference reports whole runs.
 
     Returns
     -------
@@ -117,8 +119,8 @@ def simulate(
 
         cp = compile_problem(problem)  # before the bar: it counts runs solved, not the compile
     # no bar, no tqdm import and no callback when it is off: the engine then solves the
-    # batch in one pass
-    bar = progress_bar(B, "simulate", enabled=progress) if progress_shown(progress) else None
+    # batch on this thread
+    bar = horizon_bar(B, t0, t_end, "simulate", enabled=progress) if progress_shown(progress) else None
     with bar if bar is not None else contextlib.nullcontext():
         kw = {"options": options, "save": solver_save, "progress": None if bar is None else bar.update}
         if backend == "engine":

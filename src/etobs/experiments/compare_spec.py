@@ -23,6 +23,7 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import located
 from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build
+from etobs.hybrid.options import SolverOptions, beyond_step_limit
 from etobs.model.network import (
     BernoulliLoss,
     ConstantDelay,
@@ -232,6 +233,12 @@ def parse_compare_spec(raw: dict[str, Any], *, folder: str | Path | None = None)
     top = _keys(TOP, raw, {**required, "rules": rules}, optional | {"networks"})
     common = parse_common(top, default_name="compare", kwargs_key="params")
     params = common.pop("kwargs")
+    # refused before any run is spent: each would stop at its step limit
+    too_long = beyond_step_limit(
+        common["t_end"], SolverOptions(**common["solver"]), t_end="horizon.t_end", solver="solver."
+    )
+    if too_long:
+        raise SpecError(too_long)
     rules = _list("rules", top["rules"], _rule)
     networks = _list("networks", top.get("networks", [{"name": "ideal"}]), _network)
     check_size(len(rules) * len(networks), common["initial_states"].runs, "`rules` x `networks`")

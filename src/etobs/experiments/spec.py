@@ -24,6 +24,7 @@ from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import located
 from etobs.experiments.common import COMMON_KEYS, Experiment, check_size, normalize, parse_common
 from etobs.experiments.systems import build, check_arguments
+from etobs.hybrid.options import SolverOptions, beyond_step_limit
 
 #: Columns of the result tables; a parameter may not take one of these names.
 RESERVED = ("row", "scenario", "run", "status", "transmissions", "error", "steps", "runs", "completed")
@@ -157,6 +158,12 @@ def parse_spec(raw: dict[str, Any], *, folder: str | Path | None = None) -> Swee
     top = _keys(TOP, raw, required, optional | {"rows", "grid", "scenarios"})
     common = parse_common(top, default_name="sweep", kwargs_key="fixed")
     fixed = common.pop("kwargs")
+    # refused before any run is spent: each would stop at its step limit
+    too_long = beyond_step_limit(
+        common["t_end"], SolverOptions(**common["solver"]), t_end="horizon.t_end", solver="solver."
+    )
+    if too_long:
+        raise SpecError(too_long)
     if "rows" in top and "grid" in top:
         raise SpecError("give either `rows` or `grid`, not both")
     scenarios = _scenarios(top.get("scenarios", [{"name": "default"}]))

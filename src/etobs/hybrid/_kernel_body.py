@@ -386,6 +386,7 @@ def _solve_one(
                 _grid_keep(grid_x, grid_j, dist, grid_max, run, gnext, j, xs)
                 gnext += 1
             t = t_stop
+            t_final[run] = t  # read while the run goes on: the progress bar's simulated time
             for q in range(n):
                 x[q] = x_new[q]
             if keep_steps:

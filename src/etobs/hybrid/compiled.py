@@ -27,6 +27,7 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid, log_names
+from etobs.hybrid.status import Status
 from etobs.hybrid.system import _check_sizes, check_log_columns
 
 #: Jump-log rows and arc points kept per run on the first pass (runs with more are
@@ -38,13 +39,11 @@ ARC_CAPACITY = 8192
 #: columns, an arc point t, j and the state.
 _BUFFER_BUDGET = 2**22
 _NEVER = 2**62  # a count no run reaches (SolverOptions(zeno_jumps=None))
-#: With a progress callback, the engine solves the batch in chunks of at least this many
-#: runs per thread and reports each chunk as it finishes: enough runs per thread that an
-#: uneven run rarely idles the others, few enough that the reports come often.
-CHUNK_PER_THREAD = 4
-#: ... and in at most this many chunks: each chunk's threads wait for its slowest run,
-#: which cost 5-25 % on robot-arm batches of 400-2000 runs in chunks of 4 per thread.
-MAX_CHUNKS = 50
+RUNNING = int(Status.RUNNING)
+#: Seconds between two readings of the runs' simulated time for a progress callback: the
+#: kernel writes each run's time after every accepted step (one store, no call), and the
+#: caller's thread reads them while the batch is solved in one pass on another thread.
+POLL = 0.2
 
 
 @dataclass(frozen=True)
@@ -190,7 +189,7 @@ def solve_compiled(
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
     parallel: bool = True,
-    progress: Callable[[int], object] | None = None,
+    progress: Callable[[float], object] | None = None,
 ) -> HybridSolution:
     """Solve a batch of runs of a :class:`CompiledSystem`.
 
@@ -209,11 +208,11 @@ def solve_compiled(
     parallel : bool
         Spread the runs over numba's threads (``numba.set_num_threads`` sets how many).
     progress : callable, optional
-        ``progress(k)`` is called each time ``k`` more runs have finished (the calls sum
-        to ``B``), e.g. a tqdm bar's ``update``. The batch is then solved in chunks of
-        at least :data:`CHUNK_PER_THREAD` runs per thread, at most :data:`MAX_CHUNKS`
-        chunks; each run's numbers are the same as
-        without chunks (runs are independent).
+        ``progress(k)`` is called every :data:`POLL` seconds with the runs done since
+        the last call, a run that has simulated to ``t`` counting ``(t - t0) / (t_end -
+        t0)`` (a float; the calls sum to ``B``), e.g. a tqdm bar's ``update``. It is
+        called on the caller's thread while the batch is solved in one pass on another;
+        the numbers are the same as without it.
 
     Returns
     -------
@@ -239,13 +238,9 @@ def solve_compiled(
     logs: dict[int, tuple[np.ndarray, ...]] = {}
     arcs: dict[int, tuple[np.ndarray, ...]] = {}
     if progress is None:
-        solve(np.arange(B), logs, arcs)  # one pass, no chunking overhead
+        solve(np.arange(B), logs, arcs)
     else:
-        size = max(CHUNK_PER_THREAD * (_threads() if parallel else 1), -(-B // MAX_CHUNKS))
-        for start in range(0, B, size):
-            runs = np.arange(start, min(start + size, B))
-            solve(runs, logs, arcs)
-            progress(runs.size)
+        _watched(partial(solve, np.arange(B), logs, arcs), out, t0, t_end, progress)
     return HybridSolution(
         t_span=(t0, t_end),
         status=out.status,
@@ -262,6 +257,44 @@ def solve_compiled(
         failures=tuple(system.failure(c) if c else "" for c in out.error_code),
         grid_max=GridMax(grid, out.grid_max) if dist.size else None,
     )
+
+
+def _watched(
+    solve: Callable[[], None], out: _Buffers, t0: float, t_end: float, progress: Callable[[float], object]
+) -> None:
+    """``solve()`` on a thread; meanwhile ``progress`` gets the runs done, by simulated time.
+
+    A run counts ``(t - t0) / (t_end - t0)`` while it goes on (its ``t_final``, which the
+    kernel writes after every accepted step) and 1 once its status is written, however it
+    ended. The sum never goes down (a run solved again for room in its buffers restarts
+    at ``t0`` but is already counted). The wait ends when the thread does, which the
+    solver's limits bound.
+    """
+    raised: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            solve()
+        except BaseException as exc:  # handed to the caller's thread below
+            raised.append(exc)
+
+    worker = threading.Thread(target=target, name="etobs-engine", daemon=True)
+    span = t_end - t0
+    reported = 0.0
+    out.t_final[:] = t0  # runs not yet started have simulated nothing
+    worker.start()
+    while worker.is_alive():
+        worker.join(POLL)
+        ended = out.status != RUNNING
+        running = np.clip((out.t_final - t0) / span, 0.0, 1.0) if span > 0 else 0.0
+        done = float(np.sum(np.where(ended, 1.0, running)))
+        if done > reported:
+            progress(done - reported)
+            reported = done
+    if raised:
+        raise raised[0]
+    if out.status.size > reported:
+        progress(out.status.size - reported)
 
 
 def _solve_runs(
@@ -334,7 +367,8 @@ class _Buffers:
     """Per-run outputs of the kernel."""
 
     def __init__(self, B: int, n: int, n_grid: int, *, reduce: bool) -> None:
-        self.status = np.zeros(B, dtype=np.int64)
+        # the kernel writes both at the end of each run, and t_final after every step too
+        self.status = np.full(B, RUNNING, dtype=np.int64)
         self.t_final = np.zeros(B)
         self.j_final = np.zeros(B, dtype=np.int64)
         self.x_final = np.zeros((B, n))

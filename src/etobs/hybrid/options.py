@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,6 +13,12 @@ from etobs.errors import InputError, InputTypeError
 
 METHODS = ("dop853", "dopri5")
 _INT_LIMIT = 2**62
+#: Default step limit per run. An engine step of the robot arm (section 8, two nodes)
+#: costs 3-9 us on one core of a shared machine (measured, benchmarks/bench_robot_arm.py),
+#: so a run that never reaches its horizon stops within about 20 s, and a model ten times
+#: as costly within minutes, with status ``max_steps``; the longest run of Table 1 (30 s)
+#: takes 11,100 steps. The earlier 10,000,000 let a runaway run go on for 6 minutes.
+MAX_STEPS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -35,7 +42,9 @@ class SolverOptions:
     max_steps : int
         Step limit per run (accepted and rejected steps on the engine; accepted steps
         on the scipy reference, which counts them inside every flow segment); a run
-        reaching it stops with status ``max_steps``.
+        reaching it stops with status ``max_steps``. The default (:data:`MAX_STEPS`) ends
+        a runaway run (``t_end=1e300``, ``max_step=1e-12``) of the robot arm in about 20 s
+        on the engine, and is 180 times the steps of the longest run of Table 1.
     zeno_jumps : int or None
         The Zeno rule (:mod:`etobs.hybrid.zeno`): a run whose jumps number more than
         ``zeno_jumps`` within a time window of ``zeno_span * max(1, |t|)`` stops with
@@ -63,7 +72,7 @@ class SolverOptions:
     max_step: float = np.inf
     first_step: float | None = None
     max_jumps: int = 1_000_000
-    max_steps: int = 10_000_000
+    max_steps: int = MAX_STEPS
     zeno_jumps: int | None = 1000
     zeno_span: float = 1e-7
     event_samples: int = 8
@@ -158,6 +167,27 @@ class SaveAt:
         if pairs.min() < 0 or pairs.max() >= n:
             raise InputError(f"`max_distance` indices must lie in 0 .. {n - 1} (the state size); got {d!r}")
         return pairs
+
+
+def beyond_step_limit(span: float, options: SolverOptions, *, t_end: str = "t_end", solver: str = "") -> str:
+    """Why a run over a horizon of length ``span`` cannot end before ``max_steps``; ``""`` if it may.
+
+    A run takes at least ``span / max_step`` steps, so when that is more than
+    ``max_steps`` every run would stop with status ``max_steps`` after its whole step
+    budget: the work is refused before it is spent. ``t_end`` and ``solver`` (a prefix
+    of ``max_step``, ``max_steps``) spell the settings as the caller's input does, e.g.
+    ``"horizon.t_end"`` and ``"solver."`` for a spec.
+    """
+    fewest = span / options.max_step
+    if fewest <= options.max_steps:
+        return ""
+    step, steps = f"{solver}max_step", f"{solver}max_steps"
+    count = f"{math.ceil(fewest)}" if fewest < 1e12 else f"{fewest:.3g}"
+    return (
+        f"`{t_end}` = {span:g} needs at least {count} steps at `{step}` = {options.max_step:g}, "
+        f"more than `{steps}` = {options.max_steps} (every run would stop with status max_steps); "
+        f"raise `{steps}` or `{step}`, or shorten the horizon"
+    )
 
 
 def checked_options(options: Any) -> SolverOptions:

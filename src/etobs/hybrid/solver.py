@@ -133,9 +133,10 @@ def solve(
         the Python functions as they are (``"auto"`` takes it for a
         :class:`BatchedSystem`). Both follow the contract in the module docstring.
     progress : callable, optional
-        Called as ``progress(k)`` each time ``k`` more runs have finished; the calls sum
-        to ``B`` (pass a tqdm bar's ``update``). The numbers do not depend on it: the
-        engine then solves the batch in chunks of runs, each run as it would alone.
+        Called as ``progress(k)`` with the runs done since the last call; the calls sum
+        to ``B`` (pass a tqdm bar's ``update``). The reference reports each run as it
+        ends; the engine every 0.2 s, a run that has reached ``t`` counting ``(t - t0) /
+        (t_end - t0)`` (a float). The numbers do not depend on it.
 
     Returns
     -------
