@@ -401,6 +401,7 @@ def _check_shapes(pb: EstimationProblem) -> None:
     The inputs are read-only, as in the solvers: a function that writes into them is
     refused here, naming it, on either backend.
     """
+    from etobs.estimation.calls import refuse_complex
     from etobs.hybrid.system import raised, read_only
 
     p, o = pb.plant, pb.observer
@@ -419,8 +420,11 @@ def _check_shapes(pb: EstimationProblem) -> None:
 
     def check(name: str, out: Any, n: int, what: str) -> np.ndarray:
         try:
-            arr = np.asarray(out, dtype=float)
-        except (TypeError, ValueError):
+            arr = refuse_complex(name, np.asarray(out))
+            arr = np.asarray(arr, dtype=float)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
             arr = np.asarray(out, dtype=object)
         if arr.shape != (n,):
             hint = ""
