@@ -241,31 +241,62 @@ def _refuse_non_function(fn: Any, name: str) -> None:
 
 
 def _load_or_compile(wrapper: Any, cached: bool, name: str) -> Any:
-    """``wrapper`` as a C function, from the disk cache when it is there."""
+    """``wrapper`` as a C function, from the disk cache when it is there.
+
+    A cache entry that cannot be loaded (damaged, or written by another version) is
+    discarded, with one warning, and the code compiled and cached again; if even that
+    fails, it is compiled in memory. The functions it calls are discarded with it.
+    """
+    from etobs.compile.cache import KEY, discard
+
     try:
-        return _cfunc(wrapper, cached)
+        return _cfunc(wrapper, cached, name)
     except Exception as exc:
         if not cached:
             raise
-        # a cache entry that cannot be loaded (written by another version, say)
-        # must not stop the user: compile in memory and say so
-        cf = _cfunc(wrapper, False)
+        keys = [wrapper.__globals__[KEY]]
+        keys += [g.py_func.__globals__[KEY] for g in wrapper.__globals__.values() if _cached_jit(g)]
+        discard(keys)
+        try:
+            cf = _cfunc(wrapper, True, name)
+            what = "discarded it and compiled it again"
+        except Exception:
+            cf = _cfunc(wrapper, False, name)
+            what = "compiled it again in memory"
         warnings.warn(
-            f"etobs: could not load the cached code of {name} ({_reason(exc)}); compiled it "
-            "again. Deleting the cache folder (see etobs.compile.cache) is always safe",
+            f"etobs: could not load the cached code of {name} ({_reason(exc)}); {what}. "
+            "Deleting the cache folder (see etobs.compile.cache) is always safe",
             RuntimeWarning,
             stacklevel=3,
         )
         return cf
 
 
-def _cfunc(wrapper: Any, cached: bool) -> Any:
+def _cached_jit(g: Any) -> bool:
+    from etobs.compile.cache import KEY
+
+    return hasattr(g, "py_func") and KEY in getattr(g.py_func, "__globals__", {})
+
+
+def _cfunc(wrapper: Any, cached: bool, name: str) -> Any:
     import numba
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(record=True) as seen:
         # numba's own warnings (performance hints, unsafe casts) are not the user's errors
-        warnings.simplefilter("ignore", numba.NumbaWarning)
-        return numba.cfunc(c_signature(), cache=cached, error_model="numpy")(wrapper)
+        warnings.simplefilter("always", numba.NumbaWarning)
+        out = numba.cfunc(c_signature(), cache=cached, error_model="numpy")(wrapper)
+    for w in seen:
+        if "Cannot cache" in str(w.message):  # a silent slow path: every process compiles it again
+            warnings.warn(
+                f"etobs: the machine code of {name} cannot be cached ({w.message}): every new "
+                "process compiles it again. A large array read as a constant (over 1 MB) does this: "
+                "pass it in `params` instead",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+        elif not issubclass(w.category, numba.NumbaWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return out
 
 
 def _hash_text(text: str) -> str:
