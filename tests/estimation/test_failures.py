@@ -299,3 +299,33 @@ def test_a_complex_plant_is_refused_with_the_same_words_on_both_backends():
             np.zeros((1, 0)),
             np.zeros((1, 0)),
         )
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_h_that_is_nan_at_the_initial_state_is_named_not_x0(backend):
+    # before: "`x0` must be finite; runs [0] are not", of a finite x0
+    pb = _problem(
+        _decay,
+        DynamicRule(gamma=Quadratic(1.0), eps=0.01),
+        h=lambda x: x * math.nan if x[0] == 1.0 else x.copy(),
+    )
+    with pytest.raises(
+        ModelError,
+        match=r"^`h` \(or the noise `m`\) returned a value that is not finite at `x0`, in runs \[1\]",
+    ):
+        simulate(pb, [[2.0], [1.0]], 1.0, backend=backend)
+
+
+def test_v_without_n_v_says_to_give_the_plant_n_v():
+    from etobs import InputError, Sinusoid
+
+    # before: "`v` has dimension 1; expected 0" and nothing more
+    with pytest.raises(
+        InputError, match=r"^`v` has dimension 1; expected 0 \(the plant's `n_v`\): give the plant `n_v=1`"
+    ):
+        EstimationProblem(
+            Plant(f_p=_decay, h=lambda x: x.copy(), n_x=1, n_y=1),
+            Observer(f_o=lambda t, z, u, ybar, yhat: ybar - z, n_z=1),
+            [Node((0,), StaticRule(Quadratic(1.0), eps=0.01))],
+            v=Sinusoid(amplitude=[0.1], omega=1.0),
+        )
