@@ -241,3 +241,29 @@ def test_status_labels_and_messages():
     assert res.status_labels() == ["max_steps", "max_steps"]
     assert not res.ok
     assert res.transmissions.counts(2, 2).sum() == 0
+
+
+@pytest.mark.parametrize("debug", ["", "1"])
+def test_the_cli_prints_one_line_and_the_chain_only_under_etobs_debug(monkeypatch, capsys, debug):
+    import argparse
+
+    from etobs.cli import main as cli
+    from etobs.errors import ModelError
+
+    def fails(args):
+        try:
+            raise ValueError("numba's reason, deep inside")
+        except ValueError as exc:
+            raise ModelError("`f_p` cannot be compiled: numba's reason") from exc
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(func=fails))
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setenv("ETOBS_DEBUG", debug)
+    with pytest.raises(SystemExit) as info:
+        cli.main(["check", "x.toml"])
+    err = capsys.readouterr().err
+    assert info.value.code == 2
+    assert err.splitlines()[-1] == "etobs: error: `f_p` cannot be compiled: numba's reason"
+    assert ("numba's reason, deep inside" in err) == bool(debug)
+    assert len(err.splitlines()) == 1 or debug

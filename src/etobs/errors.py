@@ -7,6 +7,27 @@ argument, what was expected and what was received.
 
 from __future__ import annotations
 
+import os
+
+#: Set to ``1`` to see, under an error from compiling or calling a user function, the
+#: whole chained traceback of its cause (numba's, hundreds of lines); without it the cause
+#: is kept, not printed, in the exception's ``__context__``.
+DEBUG_ENV = "ETOBS_DEBUG"
+
+
+def debug() -> bool:
+    """Whether ``$ETOBS_DEBUG`` asks for the chained tracebacks (:data:`DEBUG_ENV`)."""
+    return os.environ.get(DEBUG_ENV, "").strip().lower() not in {"", "0", "off", "no", "false"}
+
+
+def cause(exc: BaseException) -> BaseException | None:
+    """What to chain a short error to: ``exc`` under ``$ETOBS_DEBUG``, else nothing.
+
+    ``raise ModelError(...) from cause(exc)`` prints the one-line message alone; the
+    original exception stays in ``__context__`` for a debugger or a test.
+    """
+    return exc if debug() else None
+
 
 class EtobsError(Exception):
     """Base class of every exception raised on purpose by etobs."""

@@ -178,3 +178,154 @@ def test_a_late_write_into_an_input_is_refused_with_the_same_words_on_both_backe
     assert res.status_labels() == ["model_error"]
     assert f"`f_p` {WRITES}" in res.messages()[0]
     assert res.solution.t_final[0] <= 0.5
+
+
+# ---- errors from compiling or calling a user function (issue 23) --------------------------------
+
+_A = np.array([[0.0, 1.0], [-2.0, -0.5]])
+_RULE = DynamicRule(gamma=Quadratic(5.0), alpha=Linear(2.0), sigma=10.0, c=0.01, b=1.0, eps=0.01, eta0=1.0)
+
+
+def _two(f_p=None, f=None):
+    """A 2-state oscillator, one node per output, a Luenberger observer on the model ``f``."""
+    from etobs import luenberger
+
+    plant = Plant(f_p=f_p or (lambda t, x, u, v: _A @ x), h=lambda x: x, n_x=2, n_y=2)
+    observer = luenberger(f or (lambda t, x, u: _A @ x), L=np.eye(2) * 3.0)
+    return EstimationProblem(plant, observer, [Node((0,), _RULE), Node((1,), _RULE)])
+
+
+SCRIPT = """
+import numpy as np
+from etobs import DynamicRule, EstimationProblem, Node, Observer, Plant, Quadratic, simulate
+
+def f_p(t, x, u, v):
+    table = {"k": object()}  # numba cannot compile a dict of objects
+    return -x
+
+pb = EstimationProblem(Plant(f_p=f_p, h=lambda x: x, n_x=1, n_y=1),
+                       Observer(f_o=lambda t, z, u, ybar, yhat: ybar - z, n_z=1),
+                       [Node((0,), DynamicRule(gamma=Quadratic(1.0), eps=0.01))])
+simulate(pb, [1.0], 1.0)
+"""
+
+
+@pytest.mark.parametrize("debug", ["", "1"])
+def test_a_compile_error_prints_a_few_lines_and_numba_s_traceback_only_on_request(tmp_path, debug):
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "model.py"
+    script.write_text(SCRIPT)
+    env = {**os.environ, "ETOBS_CACHE_DIR": str(tmp_path / "cache"), "ETOBS_DEBUG": debug}
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, cwd=tmp_path)
+    lines = out.stderr.splitlines()
+    assert out.returncode == 1
+    assert lines[-1].startswith(
+        "etobs.errors.ModelError: `f_p` cannot be compiled: Untyped global name 'object'"
+    )
+    if debug:  # the chained numba traceback: 347 lines before this change, on every run
+        assert len(lines) > 100 and "numba" in out.stderr
+    else:
+        assert len(lines) <= 15 and "numba" not in out.stderr
+
+
+def test_the_cause_of_a_short_compile_error_stays_inspectable():
+    from etobs.compile import FunctionSpec, compile_function
+
+    def f(x):
+        return {"k": object()}
+
+    with pytest.raises(ModelError, match=r"^`h` cannot be compiled") as info:
+        compile_function(f, FunctionSpec("A0", (1,), 1), "h")
+    assert info.value.__cause__ is None and info.value.__suppress_context__
+    assert "numba" in type(info.value.__context__).__module__
+
+
+def test_a_bound_method_is_named_as_the_user_wrote_it():
+    class Model:
+        def f_p(self, t, x, u, v):
+            return _A @ x
+
+    pb = _two(f_p=Model().f_p)
+    with pytest.raises(ModelError, match=r"^`f_p` is a bound method \(.*Model\.f_p\), whose `self`") as info:
+        simulate(pb, [1.0, 0.0], 1.0, backend="engine")
+    assert "USER" not in str(info.value)
+    assert simulate(pb, [1.0, 0.0], 1.0, backend="scipy").ok  # the reference runs any Python
+
+
+@pytest.mark.parametrize(
+    "f_p, f",
+    [
+        (lambda t, x, u, v: [x[1], -2.0 * x[0] - 0.5 * x[1]], None),  # a list, as np.asarray takes it
+        (
+            lambda t, x, u, v: (x[1], -2.0 * x[0] - 0.5 * x[1]),
+            lambda t, x, u: (x[1], -2.0 * x[0] - 0.5 * x[1]),
+        ),
+    ],
+    ids=["list", "tuple in luenberger"],
+)
+def test_lists_and_tuples_run_on_both_backends_with_the_same_transmissions(f_p, f):
+    # before: the list failed on the engine naming `store`, the tuple in luenberger blamed `f_o`
+    pb = _two(f_p=f_p, f=f)
+    ref = _two()
+    runs = [simulate(p, [1.0, 0.0], 5.0, backend=b) for p in (pb, ref) for b in BACKENDS]
+    assert all(r.ok for r in runs)
+    for r in runs[1:]:
+        np.testing.assert_allclose(r.transmissions.t, runs[0].transmissions.t, rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(r.transmissions.rule, runs[0].transmissions.rule)
+
+
+COMPLEX = r"^`f_p` returned complex values; the states are real: return the real part \(np.real\)"
+
+
+def test_a_complex_plant_is_refused_with_the_same_words_on_both_backends():
+    # before: backend="scipy" dropped the imaginary part (a ComplexWarning) and completed
+    with pytest.raises(ModelError, match=COMPLEX):
+        _two(f_p=lambda t, x, u, v: _A @ x + 0j)
+    from etobs.compile import FunctionSpec, compile_function
+    from etobs.estimation.calls import _rows
+
+    with pytest.raises(ModelError, match=COMPLEX):  # the engine, complex only on this path
+        compile_function(lambda t, x, u, v: x * (1 + 0j), FunctionSpec("t, A0, A1, A2", (2, 0, 0), 2), "f_p")
+    with pytest.raises(ModelError, match=COMPLEX):  # the reference, complex on a later state
+        _rows(
+            "f_p",
+            2,
+            lambda t, x, u, v: x + 0j,
+            np.zeros(1),
+            np.ones((1, 2)),
+            np.zeros((1, 0)),
+            np.zeros((1, 0)),
+        )
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_h_that_is_nan_at_the_initial_state_is_named_not_x0(backend):
+    # before: "`x0` must be finite; runs [0] are not", of a finite x0
+    pb = _problem(
+        _decay,
+        DynamicRule(gamma=Quadratic(1.0), eps=0.01),
+        h=lambda x: x * math.nan if x[0] == 1.0 else x.copy(),
+    )
+    with pytest.raises(
+        ModelError,
+        match=r"^`h` \(or the noise `m`\) returned a value that is not finite at `x0`, in runs \[1\]",
+    ):
+        simulate(pb, [[2.0], [1.0]], 1.0, backend=backend)
+
+
+def test_v_without_n_v_says_to_give_the_plant_n_v():
+    from etobs import InputError, Sinusoid
+
+    # before: "`v` has dimension 1; expected 0" and nothing more
+    with pytest.raises(
+        InputError, match=r"^`v` has dimension 1; expected 0 \(the plant's `n_v`\): give the plant `n_v=1`"
+    ):
+        EstimationProblem(
+            Plant(f_p=_decay, h=lambda x: x.copy(), n_x=1, n_y=1),
+            Observer(f_o=lambda t, z, u, ybar, yhat: ybar - z, n_z=1),
+            [Node((0,), StaticRule(Quadratic(1.0), eps=0.01))],
+            v=Sinusoid(amplitude=[0.1], omega=1.0),
+        )

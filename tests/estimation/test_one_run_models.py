@@ -148,3 +148,35 @@ def test_a_function_numba_cannot_compile_names_itself_and_scipy_still_runs_it():
         simulate(pb, [1.0], 1.0, backend="engine")
     res = simulate(pb, [1.0], 1.0, backend="scipy", save=SaveAt(grid=[1.0]))
     assert res.ok and res.on_grid().x[0, 0, 0] == pytest.approx(math.exp(-1.0), rel=1e-6)
+
+
+def _wide(n):
+    """One node sending all ``n`` outputs of ``x' = -x``."""
+    return EstimationProblem(
+        Plant(f_p=lambda t, x, u, v: -x, h=lambda x: x, n_x=n, n_y=n),
+        Observer(f_o=lambda t, z, u, ybar, yhat: -z + (ybar - yhat), n_z=n),
+        [Node(tuple(range(n)), _rule())],
+    )
+
+
+def test_the_model_text_does_not_grow_with_a_node_s_outputs():
+    # unrolled per component, 100 outputs took 278 s to compile and 5,000 overflowed the recursion
+    from etobs.estimation import _model_source as ms
+    from etobs.estimation.compiled import engine_form_of
+
+    def code(n):
+        pb = _wide(n)
+        text = ms.model_source(pb, [engine_form_of(ch.rule) for ch in pb.layout.channels]).text
+        return [line for line in text.splitlines() if " = np.array(" not in line]  # not the tables
+
+    lines = code(2)
+    assert len(code(5000)) == len(lines) and max(map(len, code(5000))) < 200
+    assert any("for cc in range(2):" in line for line in lines)
+
+
+def test_one_node_with_5000_outputs_compiles_and_runs():
+    n = 5000
+    res = simulate(_wide(n), np.ones(n), 0.5, z0=np.zeros(n))
+    assert res.ok and res.backend == "engine"
+    # the one node sends: its norm runs over all 5,000 components of e = ybar - y
+    assert len(res.transmissions) >= 1 and set(res.transmissions.rule.tolist()) == {0}

@@ -339,3 +339,26 @@ def test_a_new_model_reuses_the_cached_functions_it_shares_with_an_earlier_one(t
     new = set(edited["files"]) - set(other["files"])
     assert any("estimation model" in f for f in new) and any("lambda" in f for f in new)
     assert named(edited["files"], "f_o-") == named(first["files"], "f_o-")  # f_o loaded, never again
+
+
+def test_a_damaged_kernel_cache_entry_is_discarded_with_one_warning(tmp_path, monkeypatch):
+    monkeypatch.setenv("ETOBS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_jitcache, "_WARNED", [])
+    template = tmp_path / "tpl.py"
+    template.write_text(TEMPLATE.replace("K", "K2"))  # a module of this test only
+    consts = {"K2": 2.0, "V": np.array([0.5])}
+    ns = _jitcache.build("damaged", template, lambda: consts, {"jit": {}})
+    assert ns["twice"](3.0) == 6.5
+    pycache = tmp_path / "cache" / "kernels" / "__pycache__"
+    for data in pycache.glob("*.nbc"):
+        raw = bytearray(data.read_bytes())
+        raw[len(raw) // 3 : len(raw) // 3 + 400] = b"A" * 400  # a torn write or a bad disk
+        data.write_bytes(bytes(raw))
+    for name in [m for m in sys.modules if m.startswith(_jitcache.GENERATED + "damaged_")]:
+        monkeypatch.delitem(sys.modules, name)  # as a new process would: import the file again
+    again = _jitcache.build("damaged", template, lambda: consts, {"jit": {}})
+    # before: "RuntimeError: LLVM bitcode parsing error" at every run until the cache was deleted
+    with pytest.warns(
+        RuntimeWarning, match=r"could not load the cached machine code of twice \(.*\); discarded"
+    ):
+        assert again["twice"](3.0) == 6.5

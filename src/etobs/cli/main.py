@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
 from etobs import __version__
 from etobs._spec import SpecError
 from etobs.cli import check, compare, demo, runtime, sweep
-from etobs.errors import EtobsError
+from etobs.errors import EtobsError, debug
 
 
 class _Parser(argparse.ArgumentParser):
@@ -43,7 +44,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     Bad input never ends in a traceback: an :class:`~etobs.errors.EtobsError` (bad input
     or an unsolvable design) or an :class:`OSError` (a file or folder that cannot be
     read or written, an address in use) is one line on stderr and exit status 2; a spec
-    error names the spec file. Ctrl-C is one line and exit status 130; a closed pipe on
+    error names the spec file. With ``ETOBS_DEBUG=1`` an ``EtobsError``'s traceback and
+    its cause (numba's, say) come first. Ctrl-C is one line and exit status 130; a closed pipe on
     stdout (``etobs ... | head``) ends quietly with status 141, as a shell reports it.
     """
     parser = build_parser()
@@ -53,6 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.flush()  # inside the try: a reader that left is seen here, not at exit
         return code
     except EtobsError as exc:
+        if debug():  # ETOBS_DEBUG=1: the whole chain (numba's, say) above the one line
+            traceback.print_exception(exc, file=sys.stderr)
         parser.exit(2, f"etobs: error: {_one_line(_in_spec(args, exc))}\n")
     except BrokenPipeError:  # `etobs ... | head`: the reader left; end quietly, as a shell would
         _silence_stdout()

@@ -1,6 +1,6 @@
 """Writing a user function's result into the engine's output, for arrays and tuples alike.
 
-A one-run function may return a 1-D array or a tuple of floats; a tuple costs no
+A one-run function may return a 1-D array, a list or a tuple of floats; a tuple costs no
 allocation (numba keeps it in registers), which matters for a function called hundreds
 of thousands of times per run. :func:`store` copies either into ``out`` and returns
 ``OK`` (1) or ``BAD_SHAPE`` (2) when the length is not ``n``.
@@ -20,13 +20,13 @@ from numba.extending import intrinsic, overload
 
 
 def store(r: Any, out: Any, n: int) -> int:
-    """Copy ``r`` (array or tuple) into ``out[:n]``; 1 when ``len(r) == n``, else 2."""
+    """Copy ``r`` (array, list or tuple) into ``out[:n]``; 1 when ``len(r) == n``, else 2."""
     raise NotImplementedError("compiled only")  # pragma: no cover
 
 
 @overload(store)
 def _store(r: Any, out: Any, n: Any) -> Any:
-    if isinstance(r, types.Array):
+    if isinstance(r, types.Array) and not isinstance(r.dtype, types.Complex):
 
         def from_array(r: Any, out: Any, n: Any) -> Any:
             if r.shape[0] != n:
@@ -36,7 +36,17 @@ def _store(r: Any, out: Any, n: Any) -> Any:
             return 1
 
         return from_array
-    if isinstance(r, (types.UniTuple, types.Tuple)):
+    if isinstance(r, types.List) and isinstance(r.dtype, (types.Float, types.Integer)):
+        # a Python list, as the reference accepts (it calls np.asarray)
+        def from_list(r: Any, out: Any, n: Any) -> Any:
+            if len(r) != n:
+                return 2
+            for i in range(n):
+                out[i] = r[i]
+            return 1
+
+        return from_list
+    if isinstance(r, (types.UniTuple, types.Tuple)) and not any(isinstance(a, types.Complex) for a in r):
         m = len(r)
 
         def from_tuple(r: Any, out: Any, n: Any) -> Any:

@@ -64,6 +64,29 @@ def install_locator() -> None:
         caching.Cache._index_key = _index_key
 
 
+def discard(keys: list[str]) -> int:
+    """Delete the cache entries of the functions keyed by ``keys`` (a damaged entry); how many files.
+
+    An entry is an index (``.nbi``) and data (``.nbc``) files whose names end in the
+    key's disambiguator (:class:`ContentLocator`); deleting them is always safe.
+    """
+    folder = cache_dir()
+    if folder is None:
+        return 0
+    gone = 0
+    for key in keys:
+        for path in (folder / "functions").glob(f"*-{_disambiguator(key)}.*"):
+            if path.suffix in (".nbi", ".nbc"):
+                path.unlink(missing_ok=True)
+                gone += 1
+    return gone
+
+
+def _disambiguator(key: str) -> str:
+    # the whole key (the function's hash and how it is called) names the file
+    return hashlib.sha256(key.encode()).hexdigest()[:24]
+
+
 def _locator_class(base: type) -> type:
     class ContentLocator(base):  # type: ignore[misc, valid-type]
         """Finds a function's cached code by the key in its globals (module docstring)."""
@@ -71,6 +94,9 @@ def _locator_class(base: type) -> type:
         def __init__(self, key: str, folder: Path) -> None:
             self._key = key
             self._folder = folder
+            # numba names this file in its warnings (a function it cannot cache); without it,
+            # its warning raised AttributeError and the cached code was never loaded
+            self._py_file = f"<etobs function {key}>"
 
         def get_cache_path(self) -> str:
             return str(self._folder)
@@ -79,8 +105,7 @@ def _locator_class(base: type) -> type:
             return self._key
 
         def get_disambiguator(self) -> str:
-            # the whole key (the function's hash and how it is called) names the file
-            return hashlib.sha256(self._key.encode()).hexdigest()[:24]
+            return _disambiguator(self._key)
 
         @classmethod
         def from_function(cls, py_func: Any, py_file: str) -> Any:

@@ -23,6 +23,7 @@ The machine code is cached on disk under a hash of the function's content (see
 
 from __future__ import annotations
 
+import re
 import threading
 import types
 import warnings
@@ -30,7 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from etobs.compile.fingerprint import _names, fingerprint
-from etobs.errors import ModelError
+from etobs.errors import ModelError, cause
 
 RAISED, OK, BAD_SHAPE, BEYOND_N_FLOW, NAN_RESULT = 0, 1, 2, 3, 4
 #: Failure codes as words, for messages.
@@ -141,6 +142,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
     from etobs.compile._store import readonly, store
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
+    _refuse_non_function(fn, name)
     source = spec.source()
     key = fingerprint(fn) + "-" + _hash_text(f"{_FORMAT}{source}{numba.__version__}")
     with _LOCK:
@@ -161,7 +163,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
         try:
             cf = _load_or_compile(namespace["wrapper"], cached, f"`{name}`")
         except Exception as exc:  # numba raises many types; all mean "cannot compile"
-            raise ModelError(_cannot_compile(name, exc, getattr(fn, ORIGIN, ""))) from exc
+            raise ModelError(_cannot_compile(name, exc, getattr(fn, ORIGIN, ""))) from cause(exc)
         out = CompiledFunction(name, int(cf.address), cf)
         _MEMO[key] = out
         return out
@@ -215,38 +217,86 @@ def compile_module(
             try:
                 cf = _load_or_compile(namespace[entry], cached, f"{entry} of the {what}")
             except Exception as exc:  # numba raises many types; all mean "cannot compile"
-                raise ModelError(f"the {what} cannot be compiled: {_reason(exc)}") from exc
+                raise ModelError(f"the {what} cannot be compiled: {_reason(exc)}") from cause(exc)
             out.append(CompiledFunction(entry, int(cf.address), cf))
         _MEMO_MODULES[key] = tuple(out)
         return _MEMO_MODULES[key]
 
 
+def _refuse_non_function(fn: Any, name: str) -> None:
+    """Refuse, in the user's words, a callable numba cannot compile: a bound method, a partial, an object.
+
+    numba would say ``Untyped global name 'USER'`` (the wrapper's name for it).
+    """
+    if hasattr(fn, "py_func") or isinstance(fn, types.FunctionType):
+        return
+    if isinstance(fn, types.MethodType):
+        what = f"a bound method ({fn.__qualname__}), whose `self` numba cannot compile"
+    else:
+        what = f"a {type(fn).__module__}.{type(fn).__qualname__}, not a Python function"
+    raise ModelError(
+        f"`{name}` is {what}: write it as a function (def or lambda) that reads the numbers it needs "
+        "from `params` or from a closure, or use backend='scipy', which runs any Python"
+    ) from None  # raised while the model's own compile error is handled: that one says less
+
+
 def _load_or_compile(wrapper: Any, cached: bool, name: str) -> Any:
-    """``wrapper`` as a C function, from the disk cache when it is there."""
+    """``wrapper`` as a C function, from the disk cache when it is there.
+
+    A cache entry that cannot be loaded (damaged, or written by another version) is
+    discarded, with one warning, and the code compiled and cached again; if even that
+    fails, it is compiled in memory. The functions it calls are discarded with it.
+    """
+    from etobs.compile.cache import KEY, discard
+
     try:
-        return _cfunc(wrapper, cached)
+        return _cfunc(wrapper, cached, name)
     except Exception as exc:
         if not cached:
             raise
-        # a cache entry that cannot be loaded (written by another version, say)
-        # must not stop the user: compile in memory and say so
-        cf = _cfunc(wrapper, False)
+        keys = [wrapper.__globals__[KEY]]
+        keys += [g.py_func.__globals__[KEY] for g in wrapper.__globals__.values() if _cached_jit(g)]
+        discard(keys)
+        try:
+            cf = _cfunc(wrapper, True, name)
+            what = "discarded it and compiled it again"
+        except Exception:
+            cf = _cfunc(wrapper, False, name)
+            what = "compiled it again in memory"
         warnings.warn(
-            f"etobs: could not load the cached code of {name} ({_reason(exc)}); compiled it "
-            "again. Deleting the cache folder (see etobs.compile.cache) is always safe",
+            f"etobs: could not load the cached code of {name} ({_reason(exc)}); {what}. "
+            "Deleting the cache folder (see etobs.compile.cache) is always safe",
             RuntimeWarning,
             stacklevel=3,
         )
         return cf
 
 
-def _cfunc(wrapper: Any, cached: bool) -> Any:
+def _cached_jit(g: Any) -> bool:
+    from etobs.compile.cache import KEY
+
+    return hasattr(g, "py_func") and KEY in getattr(g.py_func, "__globals__", {})
+
+
+def _cfunc(wrapper: Any, cached: bool, name: str) -> Any:
     import numba
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(record=True) as seen:
         # numba's own warnings (performance hints, unsafe casts) are not the user's errors
-        warnings.simplefilter("ignore", numba.NumbaWarning)
-        return numba.cfunc(c_signature(), cache=cached, error_model="numpy")(wrapper)
+        warnings.simplefilter("always", numba.NumbaWarning)
+        out = numba.cfunc(c_signature(), cache=cached, error_model="numpy")(wrapper)
+    for w in seen:
+        if "Cannot cache" in str(w.message):  # a silent slow path: every process compiles it again
+            warnings.warn(
+                f"etobs: the machine code of {name} cannot be cached ({w.message}): every new "
+                "process compiles it again. A large array read as a constant (over 1 MB) does this: "
+                "pass it in `params` instead",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+        elif not issubclass(w.category, numba.NumbaWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return out
 
 
 def _hash_text(text: str) -> str:
@@ -303,6 +353,11 @@ WRITES_INPUT = (
     "writes into one of its input arrays, which are read-only (a write would change the solver's "
     "state behind its back): work on a copy (x = x.copy()) or build a new array"
 )
+#: How both solvers word a function that returns complex numbers.
+COMPLEX_RESULT = (
+    "returned complex values; the states are real: return the real part (np.real) when the imaginary "
+    "part is zero by construction, or carry real and imaginary parts as separate states"
+)
 #: What numba says of a write into a read-only array.
 _READONLY_WRITE = ("readonly array", "Cannot modify readonly")
 
@@ -313,6 +368,14 @@ def _cannot_compile(name: str, exc: Exception, origin: str = "") -> str:
     who = f"`{name}` ({origin})" if origin else f"`{name}`"
     if any(k in text for k in _READONLY_WRITE) and ("setitem" in text or "Cannot modify" in text):
         return f"{who} {WRITES_INPUT}"
+    returned = re.search(r"store\((.+?), array\(float64, 1d, C\), ", text)
+    if returned and "complex" in returned.group(1):
+        return f"{who} {COMPLEX_RESULT}"
+    if returned:  # the wrapper's `store` could not take the result: say what the user returned
+        return (
+            f"{who} returned {returned.group(1)}, which the engine cannot store: return a 1-D float "
+            "array (np.array([...])) or a tuple of floats"
+        )
     return (
         f"{who} cannot be compiled: {_reason(exc)}. Write it for one run with numpy or "
         "math on 1-D arrays (returning a 1-D array), or use backend='scipy', which runs any Python"

@@ -187,22 +187,43 @@ class _Group:
         return out
 
     def loop(self) -> list[str]:
-        """Loop header and the node's locals ``i, s0, r, a0, b0, m0, a1, ...``."""
+        """Loop header and the node's locals ``jj, i, s0, r``."""
         return [f"for jj in range({len(self.nodes)}):", *("    " + t for t in self.locals("jj"))]
 
     def locals(self, jj: str) -> list[str]:
-        """The locals of the node at position ``jj`` (an expression) of the group.
+        """The locals of the node at position ``jj`` (a name) of the group.
 
-        ``a{c}``: the index in ``q`` of component ``c``'s sent value; ``b{c}``: that in
-        ``work`` of the value it would send now; ``m{c}``: of the current measurement.
+        ``i`` is the node's index, ``s0`` the index in ``q`` of its rule state and ``r``
+        the offset of its numbers in ``p``. Its components are read from the tables in
+        loops (:meth:`norm`, :meth:`send`), not unrolled: code unrolled over thousands of
+        components took minutes to compile (100 components: 278 s) and nested so deep
+        that Python's compiler ran out of recursion at 5,000.
         """
         g = self.index
-        out = [f"i = G{g}I[{jj}]", f"s0 = G{g}S[{jj}]", f"r = G{g}P[{jj}]"]
-        for c in range(self.first.size):
-            out += [f"a{c} = G{g}SQ[{jj}, {c}]", f"b{c} = G{g}SW[{jj}, {c}]"]
-            if self.first.form.kind == RELATIVE:
-                out.append(f"m{c} = G{g}MW[{jj}, {c}]")
-        return out
+        return [f"i = G{g}I[{jj}]", f"s0 = G{g}S[{jj}]", f"r = G{g}P[{jj}]"]
+
+    def norm(self, jj: str, relative: bool, out: str) -> list[str]:
+        """``out = |e_i| = |sent - current|``, or ``|current measurement|`` when ``relative``.
+
+        The squares are summed from the first component on, as the unrolled sum did.
+        """
+        g = self.index
+        d = f"work[G{g}MW[{jj}, cc]]" if relative else f"(q[G{g}SQ[{jj}, cc]] - work[G{g}SW[{jj}, cc]])"
+        return [
+            "acc = 0.0",
+            f"for cc in range({self.first.size}):",
+            f"    dd = {d}",
+            "    acc += dd * dd",
+            f"{out} = np.sqrt(acc)",
+        ]
+
+    def send(self, jj: str) -> list[str]:
+        """The node's current values into its held values (eq. (22): ``e_i+ = 0``)."""
+        g = self.index
+        return [
+            f"for cc in range({self.first.size}):",
+            f"    q[G{g}SQ[{jj}, cc]] = work[G{g}SW[{jj}, cc]]",
+        ]
 
 
 def _groups(nodes: list[_Node]) -> list[_Group]:
@@ -462,7 +483,7 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
             c.line("dq[s0] = 1.0")
         else:
             # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
-            c.line(f"e = {_norm(grp, False)}")
+            c.lines(grp.norm("jj", False, "e"))
             c.lines(_kcall(grp, A, "q[s0]", "av"))
             if kind == DYNAMIC:
                 c.lines(_kcall(grp, G, "e", "gv"))
@@ -493,10 +514,11 @@ def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
         if kind == PERIODIC:
             c.line(f"{gi} = PER_TRIGGER(q[s0], p[r + {P_PERIOD}])")
         elif kind == RELATIVE:
-            c.line(f"e = {_norm(grp, False)}")
-            c.line(f"{gi} = REL_TRIGGER(e, {_norm(grp, True)}, p[r + {P_RHO}], p[r + {P_EPS}])")
+            c.lines(grp.norm("jj", False, "e"))
+            c.lines(grp.norm("jj", True, "ym"))
+            c.line(f"{gi} = REL_TRIGGER(e, ym, p[r + {P_RHO}], p[r + {P_EPS}])")
         else:
-            c.line(f"e = {_norm(grp, False)}")
+            c.lines(grp.norm("jj", False, "e"))
             c.lines(_kcall(grp, G, "e", "gv"))
             if kind == STATIC:
                 c.line(f"{gi} = STATIC_TRIGGER(gv, p[r + {P_EPS}])")
@@ -530,9 +552,9 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
     for grp in groups:
         c.line(f"{'if' if grp.index == 0 else 'elif'} gk == {grp.index}:")
         c.indent()
-        c.lines(grp.locals("JP[k]"))
-        for o in range(grp.first.size):
-            c.line(f"q[a{o}] = work[b{o}]")
+        c.line("jj = JP[k]")
+        c.lines(grp.locals("jj"))
+        c.lines(grp.send("jj"))
         if grp.first.form.kind in (DYNAMIC, GENERALIZED):
             c.line(f"q[s0] = ETA_RESET(q[s0], p[r + {P_B}])")
         elif grp.first.form.kind == PERIODIC:
@@ -617,15 +639,6 @@ def _ytilde(at: _Where) -> list[str]:
     out = _call("H", f"q[0:{at.nx}]", at.pp, f"work[{wy}:{wy + ny}]", ny, S_H)
     out += _signal(2, at.signals[2], wm)
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
-
-
-def _norm(grp: _Group, relative: bool) -> str:
-    """``|e_i| = |sent - current|``, or ``|current measurement|`` when ``relative``, as an expression."""
-    terms = []
-    for o in range(grp.first.size):
-        d = f"work[m{o}]" if relative else f"(q[a{o}] - work[b{o}])"
-        terms.append(f"{d} * {d}")
-    return f"np.sqrt({' + '.join(terms)})"
 
 
 def _kcall(grp: _Group, slot: int, s: str, out: str) -> list[str]:

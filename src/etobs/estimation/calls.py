@@ -99,6 +99,15 @@ def model_specs(problem: EstimationProblem) -> dict[str, tuple[Any, Any, np.ndar
     return specs
 
 
+def refuse_complex(name: str, arr: np.ndarray) -> np.ndarray:
+    """``arr``, or a ``ModelError`` in the engine's words when ``name`` returned complex values."""
+    from etobs.compile.functions import COMPLEX_RESULT
+
+    if np.iscomplexobj(arr):
+        raise ModelError(f"`{name}` {COMPLEX_RESULT}")
+    return arr
+
+
 def _rows(name: str, n: int, fn: Any, *batches: np.ndarray) -> np.ndarray:
     """``fn`` called run by run on rows of ``batches`` (read-only), checked: shape ``(B, n)``.
 
@@ -113,9 +122,12 @@ def _rows(name: str, n: int, fn: Any, *batches: np.ndarray) -> np.ndarray:
             if a.ndim:
                 a.setflags(write=False)
         try:
-            arr = np.asarray(fn(*args), dtype=float)
+            raw = np.asarray(fn(*args))
+            if not np.iscomplexobj(raw):  # complex: refused below, as on the engine
+                raw = np.asarray(raw, dtype=float)
         except Exception as exc:  # the user's function: any failure ends the run the same way
             raise ModelError(raised(name, exc)) from exc
+        arr = refuse_complex(name, raw)
         if arr.shape != (n,):
             raise ModelError(f"`{name}` returned shape {arr.shape}; expected ({n},) for one run")
         out[b] = arr

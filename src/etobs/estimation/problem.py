@@ -146,9 +146,9 @@ class EstimationProblem:
                 "with a lossy or delayed `network` the copies would diverge, which is not simulated: "
                 "use hold='output' with a network"
             )
-        object.__setattr__(self, "u", as_signal("u", self.u, p.n_u))
-        object.__setattr__(self, "v", as_signal("v", self.v, p.n_v))
-        object.__setattr__(self, "m", as_signal("m", self.m, p.n_y))
+        object.__setattr__(self, "u", as_signal("u", self.u, p.n_u, "n_u"))
+        object.__setattr__(self, "v", as_signal("v", self.v, p.n_v, "n_v"))
+        object.__setattr__(self, "m", as_signal("m", self.m, p.n_y, "n_y"))
         object.__setattr__(self, "layout", _layout(p, self.observer, nodes, inputs, self.network))
         _check_shapes(self)
         _check_noise(self)
@@ -249,8 +249,10 @@ class EstimationProblem:
         # the Python functions: one call per run, and compiling them on their own here
         # would cost a new model more than a second (the engine compiles its own model)
         ybar = self.ytilde(tt, x0, compiled=False) + e0
+        _finite_at_start(ybar, "`h` (or the noise `m`) returned a value that is not finite at `x0`")
         if self.hold == "innovation":
             ybar = ybar - self.calls(False).h(self.psi(z0))
+            _finite_at_start(ybar, "`h(psi(z0))` is not finite (the observer-copy hold starts from it)")
         q[:, lay.ybar] = ybar
         u0 = self.u(tt)
         for ch in lay.channels:
@@ -395,12 +397,23 @@ def _layout(
     )
 
 
+def _finite_at_start(ybar: np.ndarray, what: str) -> None:
+    """Refuse held outputs that start NaN or infinite, naming the function (not ``x0``, which is finite)."""
+    bad = ~np.all(np.isfinite(ybar), axis=1)
+    if bad.any():
+        raise ModelError(
+            f"{what}, in runs {np.flatnonzero(bad).tolist()}: the held outputs `ybar` start from it; "
+            "check the function near the initial state"
+        )
+
+
 def _check_shapes(pb: EstimationProblem) -> None:
     """Call every model function once, for one run, and check what it returns.
 
     The inputs are read-only, as in the solvers: a function that writes into them is
     refused here, naming it, on either backend.
     """
+    from etobs.estimation.calls import refuse_complex
     from etobs.hybrid.system import raised, read_only
 
     p, o = pb.plant, pb.observer
@@ -419,8 +432,11 @@ def _check_shapes(pb: EstimationProblem) -> None:
 
     def check(name: str, out: Any, n: int, what: str) -> np.ndarray:
         try:
-            arr = np.asarray(out, dtype=float)
-        except (TypeError, ValueError):
+            arr = refuse_complex(name, np.asarray(out))
+            arr = np.asarray(arr, dtype=float)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
             arr = np.asarray(out, dtype=object)
         if arr.shape != (n,):
             hint = ""

@@ -83,6 +83,7 @@ def build(
     """
     folder = cache_dir()
     if folder is not None:
+        _install_load_guard()
         try:
             return _generate(kind, template, constants, decorators, depends, packages, folder)
         except OSError as exc:
@@ -194,6 +195,37 @@ def _load_file(path: Path) -> ModuleType:
             del sys.modules[name]
             raise
         return module
+
+
+def _install_load_guard() -> None:
+    """Make a damaged cache entry of a generated module a warning, not an error on every run (once).
+
+    numba loads a function's machine code at its first call; an entry it cannot read
+    (``LLVM bitcode parsing error``: a torn write, a bad disk) raised there until the user
+    deleted the cache. For the functions of generated modules, the entry's index is
+    emptied instead, with one warning: numba compiles the function and writes it again.
+    """
+    from numba.core import caching
+
+    load = caching.Cache.load_overload
+    if getattr(load, "_etobs", False):
+        return
+
+    def load_overload(self: Any, sig: Any, target_context: Any) -> Any:
+        try:
+            return load(self, sig, target_context)
+        except Exception as exc:
+            if not getattr(self._py_func, "__module__", "").startswith(GENERATED):
+                raise
+            self._cache_file.flush()  # an empty index: the entry is gone
+            _warn_once(
+                f"etobs: could not load the cached machine code of {self._py_func.__qualname__} "
+                f"({str(exc).splitlines()[0]}); discarded it and compiled it again"
+            )
+            return None
+
+    load_overload._etobs = True  # type: ignore[attr-defined]
+    caching.Cache.load_overload = load_overload
 
 
 def _warn_once(message: str) -> None:

@@ -94,11 +94,20 @@ def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger"
     """
     v.function("f", f)
     gain = np.ascontiguousarray(v.matrix("L", L, (None, None)))
+    n_x, n_y = gain.shape
 
-    def f_o(t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-        return f(t, z, u) + gain @ (ybar - yhat)
+    def f_o(
+        t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray, p: np.ndarray
+    ) -> np.ndarray:
+        # L is in `params`, not in the closure: another gain compiles nothing, and a large one
+        # (1000 x 1000) is not frozen into the machine code, which numba then cannot cache
+        dx = f(t, z, u)  # a 1-D array, a list or a tuple (as the README allows): added entry by entry
+        out = p.reshape((n_x, n_y)) @ (ybar - yhat)
+        for i in range(n_x):
+            out[i] += dx[i]
+        return out
 
-    return with_gain(Observer(f_o=f_o, n_z=gain.shape[0], name=name), gain)
+    return with_gain(Observer(f_o=f_o, n_z=n_x, name=name, params=gain.ravel()), gain)
 
 
 def with_gain(observer: Observer, gain: np.ndarray) -> Observer:

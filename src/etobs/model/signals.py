@@ -149,8 +149,11 @@ class FunctionSignal(Signal):
         return FUNCTION, np.zeros(0), self.fn
 
 
-def as_signal(name: str, value: object, dim: int) -> Signal:
-    """Accept ``None`` (zero), a :class:`Signal`, a constant vector or a callable."""
+def as_signal(name: str, value: object, dim: int, size: str = "") -> Signal:
+    """Accept ``None`` (zero), a :class:`Signal`, a constant vector or a callable.
+
+    ``size`` names the plant's dimension that ``dim`` is (``"n_v"``), for the message.
+    """
     if value is None:
         return Zero(dim)
     if isinstance(value, Signal):
@@ -162,5 +165,14 @@ def as_signal(name: str, value: object, dim: int) -> Signal:
     if sig.dim != dim:
         from etobs.errors import InputError
 
-        raise InputError(f"`{name}` has dimension {sig.dim}; expected {dim}")
+        hint = ""
+        if size in ("n_u", "n_v"):
+            hint = (
+                f" (the plant's `{size}`): give the plant `{size}={sig.dim}` (Plant(..., {size}={sig.dim}))"
+            )
+            if dim:
+                hint += f" or a `{name}` of dimension {dim}"
+        elif size:
+            hint = f" (the plant's `{size}`, one value per output)"
+        raise InputError(f"`{name}` has dimension {sig.dim}; expected {dim}{hint}")
     return sig
