@@ -83,3 +83,23 @@ def two_clocks(period_a, period_b):
         jump=_reset_clock,
         params=[period_a, period_b],
     )
+
+
+def _clock_rate(t, x, p):
+    return np.ones(1)
+
+
+def _clipped_guard(t, x, p):
+    # exactly 0 on the whole jump set tau >= period, as clipped guards of HyEQ-style models
+    return np.array([min(x[0] - p[0], 0.0)])
+
+
+def _reset_all(k, t, x, p):
+    return np.zeros_like(x)
+
+
+def clipped_clock(period=1.0):
+    """tau' = 1, reset to 0 when ``min(tau - period, 0) >= 0``: a guard that is flat at 0."""
+    return HybridSystem(
+        n=1, n_rules=1, flow=_clock_rate, guard=_clipped_guard, jump=_reset_all, params=[period]
+    )

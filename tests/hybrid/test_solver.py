@@ -12,7 +12,7 @@ import pytest
 from etobs.errors import InputError
 from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Status, solve
 
-from .systems import G, bouncing_ball, grazing_oscillator, two_clocks
+from .systems import G, bouncing_ball, clipped_clock, grazing_oscillator, two_clocks
 
 BACKENDS = ("engine", "scipy")
 
@@ -47,6 +47,21 @@ def test_bouncing_ball_impact_times_match_closed_form(backend):
     assert sol.status.tolist() == [Status.COMPLETED]
     assert sol.backend == backend
     assert sol.rule_names == ("impact",)
+
+
+def test_entry_into_a_jump_set_where_the_guard_is_flat_at_zero_is_exact(backend):
+    # min(tau - 1, 0) is 0 on all of tau >= 1: every point there is a root of the guard.
+    # Before, the reference's brentq stopped at whichever it met: jumps at 1.0106,
+    # 2.1242, 3.1396 (the engine and the closed form: 1, 2, 3)
+    xtol = SolverOptions().event_xtol
+    sol = solve(clipped_clock(1.0), [0.0], (0.0, 3.5), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    t = sol.jumps.t
+    assert len(t) == 3
+    # each jump is at most event_xtol after the entry, and the clock restarts there
+    periods = np.diff(np.concatenate([[0.0], t]))
+    assert np.all(periods >= 1.0 - 1e-14), periods - 1.0
+    assert np.all(periods <= 1.0 + xtol), periods - 1.0
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])

@@ -367,7 +367,7 @@ class _Run:
         best = b
         for k in np.flatnonzero((ga < 0) & (gb >= 0)):
             r = brentq(
-                lambda s, k=k: float(self.at(dense, s)[1][k]),
+                lambda s, k=k: _entered(float(self.at(dense, s)[1][k])),
                 a,
                 b,
                 xtol=self.opts.event_xtol / 4,
@@ -379,6 +379,22 @@ class _Run:
                 break
             best = min(best + self.opts.event_xtol / 4, self.t_end)
         return best
+
+
+def _entered(g: float) -> float:
+    """An event function's value for the root finder: 0 (in the jump set) counts as positive.
+
+    The jump set is ``g >= 0``, so the event is the entry into it, not a zero of ``g``. A
+    guard that is exactly 0 on an interval (clipped, ``min(tau - 1, 0)``) has every point
+    of it as a root, and ``brentq`` stopped at whichever it met first: the jumps of a
+    clock of period 1 came at 1.0106, 2.1242, 3.1396. With 0 moved to the smallest
+    positive float there is one sign change, at the entry, and ``brentq`` brackets it to
+    ``xtol`` as the engine's regula falsi does (it too keeps ``g >= 0`` on the right end).
+    """
+    return g if g != 0.0 else _TINY
+
+
+_TINY = float(np.nextafter(0.0, 1.0))
 
 
 def _call(name: str, fn: Any, *args: Any) -> Any:
