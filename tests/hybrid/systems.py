@@ -103,3 +103,15 @@ def clipped_clock(period=1.0):
     return HybridSystem(
         n=1, n_rules=1, flow=_clock_rate, guard=_clipped_guard, jump=_reset_all, params=[period]
     )
+
+
+def _late_clock_guard(t, x, p):
+    # time-varying: no jump before t = p[0], then one each time tau reaches p[1]
+    return np.array([min(t - p[0], x[0] - p[1])])
+
+
+def late_clock(start=1.5, period=0.5):
+    """tau' = 1, reset to 0 when ``min(t - start, tau - period) >= 0``: jumps at start + k period."""
+    return HybridSystem(
+        n=1, n_rules=1, flow=_clock_rate, guard=_late_clock_guard, jump=_reset_all, params=[start, period]
+    )

@@ -12,7 +12,7 @@ import pytest
 from etobs.errors import InputError
 from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Status, solve
 
-from .systems import G, bouncing_ball, clipped_clock, grazing_oscillator, two_clocks
+from .systems import G, bouncing_ball, clipped_clock, grazing_oscillator, late_clock, two_clocks
 
 BACKENDS = ("engine", "scipy")
 
@@ -62,6 +62,33 @@ def test_entry_into_a_jump_set_where_the_guard_is_flat_at_zero_is_exact(backend)
     periods = np.diff(np.concatenate([[0.0], t]))
     assert np.all(periods >= 1.0 - 1e-14), periods - 1.0
     assert np.all(periods <= 1.0 + xtol), periods - 1.0
+
+
+def test_a_jump_due_at_the_final_time_is_not_applied_on_either_backend(backend):
+    # min(t - 1.5, tau - 0.5) >= 0: jumps at 1.5, 2, 2.5, 3. Before, the one at t_end = 3
+    # was kept by the reference (3.0) and dropped by the engine (its clock 5e-13 late):
+    # kept or dropped by rounding. Rule (docs/solver.md): a jump within event_xtol of
+    # t_end is not applied, and the run ends on its flow at t_end.
+    sol = solve(late_clock(1.5, 0.5), [0.0], (0.0, 3.0), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    np.testing.assert_allclose(sol.jumps.t, [1.5, 2.0, 2.5], atol=1e-11)
+    assert sol.t_final[0] == 3.0
+    assert sol.x_final[0, 0] == pytest.approx(0.5, abs=1e-11)  # flowed on, not reset
+
+
+@pytest.mark.parametrize(("past_end", "jumps"), [(-0.5, 1), (0.5, 1), (5.0, 2)])
+def test_the_final_time_rule_on_both_sides_of_its_boundary(backend, past_end, jumps):
+    # jumps at 1.5 and 3: with t_end = 3 + past_end * event_xtol the jump at 3 is applied
+    # only when it is more than event_xtol before t_end (a coarse event_xtol keeps the
+    # boundary far from rounding)
+    xtol = 1e-6
+    options = SolverOptions(event_xtol=xtol)
+    t_end = 3.0 + past_end * xtol
+    sol = solve(late_clock(1.5, 1.5), [0.0], (0.0, t_end), options=options, backend=backend)
+    assert sol.status_labels() == ["completed"]
+    assert len(sol.jumps) == jumps, sol.jumps.t
+    np.testing.assert_allclose(sol.jumps.t, [1.5, 3.0][:jumps], atol=2 * xtol)
+    assert sol.t_final[0] == t_end
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])

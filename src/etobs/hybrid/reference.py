@@ -115,6 +115,8 @@ def solve_reference(
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             try:
                 status[b] = run.solve()
+            except _Overflowed:
+                status[b] = Status.NONFINITE
             except ModelError as exc:  # a model function failed: this run ends, the others go on
                 status[b], failures[b] = Status.MODEL_ERROR, str(exc)
         t_final[b], j_final[b], x_final[b], n_steps[b] = run.t, run.j, run.x, run.n_steps
@@ -200,13 +202,15 @@ class _Run:
         if x is last_x and t == last_t:
             return last_g
         # a copy: the values are remembered, whatever the guard does with its output
-        g = _event_values(_call("guard", self.sys.guard, np.array((t,)), x[None]), (1, self.sys.n_rules))[0]
+        g = _event_values(_call("guard", self.sys.guard, np.array((t,)), x[None]), x[None], self.sys.n_rules)[
+            0
+        ]
         self.last = (t, x, g)
         return g
 
     def gk(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Event functions at many points, t (K,), x (K, n) -> (K, m)."""
-        return _event_values(_call("guard", self.sys.guard, t, x), (t.shape[0], self.sys.n_rules))
+        return _event_values(_call("guard", self.sys.guard, t, x), x, self.sys.n_rules)
 
     def at(self, dense: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
         """State and event functions at ``t`` on the dense output of this segment."""
@@ -257,6 +261,10 @@ class _Run:
     def segment(self) -> Status:
         """Flow from the current state to the next event (or the end), then jump."""
         o = self.opts
+        # a jump due at the final time (within event_xtol of it) is not applied: the run
+        # ends on its flow at t_end (docs/solver.md, "Jumps at the final time")
+        cutoff = self.t_end - o.event_xtol
+        events = self.events if self.t <= cutoff else None
         first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
         method = _budgeted_dop853(o.max_steps - self.n_steps)
         sol = solve_ivp(
@@ -267,7 +275,7 @@ class _Run:
             rtol=o.rtol,
             atol=o.atol,
             max_step=o.max_step,
-            events=self.events,
+            events=events,
             dense_output=True,
             **first,
         )
@@ -289,7 +297,7 @@ class _Run:
             bracket = (float(sol.t[-2]) if sol.t.size > 1 else self.t, t_hit)
         # Guard: sample every step (and probe predicted peaks); an earlier crossing
         # overrides solve_ivp's event.
-        if self.events:
+        if events:
             early = self.scan(dense, float(self.t), self.g_start)
             if early is not None and (bracket is None or early[1] < bracket[1]):
                 bracket = early
@@ -311,6 +319,8 @@ class _Run:
         self.t, self.x = t_stop, x_stop
         if bracket is None:
             self.t = self.t_end
+            return Status.RUNNING
+        if t_stop > cutoff:  # flow on to t_end, without events
             return Status.RUNNING
         status = self.jumps()
         if status is Status.RUNNING and self.n_steps >= o.max_steps and self.t < self.t_end:
@@ -423,14 +433,24 @@ def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
-def _event_values(out: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """The guard's values (a copy, so they are remembered whatever the guard does later).
+class _Overflowed(Exception):
+    """The guard was NaN at a state that is no longer finite: the run ends ``nonfinite``."""
 
-    NaN ends the run with ``model_error``: a NaN event function never fires, and the run
-    went on as if it were negative (a ball fell through its floor and "completed").
+
+def _event_values(out: Any, x: np.ndarray, m: int) -> np.ndarray:
+    """The ``m`` guard values at the states ``x`` (K, n), as (K, m) (a copy: they are remembered).
+
+    NaN ends the run: a NaN event function never fires, and the run went on as if it
+    were negative (a ball fell through its floor and "completed"). At a state with a
+    non-finite entry (a state that overflowed, on the dense output inside a step) the
+    NaN is the state's, and the run ends ``nonfinite``; at a finite state it is the
+    guard's, ``model_error``. The engine draws the same line; before, which of the two
+    a blow-up gave depended on the machine's floating-point path for huge arguments.
     """
-    g = _checked("guard", out, shape).copy()
+    g = _checked("guard", out, (x.shape[0], m)).copy()
     if np.isnan(g).any():
+        if not np.all(np.isfinite(x[np.isnan(g).any(axis=1)])):
+            raise _Overflowed
         raise ModelError("`guard` " + describe_failure_nan())
     return g
 
