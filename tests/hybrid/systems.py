@@ -115,3 +115,16 @@ def late_clock(start=1.5, period=0.5):
     return HybridSystem(
         n=1, n_rules=1, flow=_clock_rate, guard=_late_clock_guard, jump=_reset_all, params=[start, period]
     )
+
+
+def _cubed_guard(t, x, p):
+    # (tau - period)^3: a sign change with zero slope, so the root finder ends on its
+    # bracket width (bisection), not on an exact secant
+    return np.array([(x[0] - p[0]) ** 3])
+
+
+def cubed_clock(period):
+    """tau' = 1, reset to 0 when ``(tau - period)^3 >= 0``: jumps at period, 2 period, ..."""
+    return HybridSystem(
+        n=1, n_rules=1, flow=_clock_rate, guard=_cubed_guard, jump=_reset_all, params=[period]
+    )

@@ -12,7 +12,15 @@ import pytest
 from etobs.errors import InputError
 from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Status, solve
 
-from .systems import G, bouncing_ball, clipped_clock, grazing_oscillator, late_clock, two_clocks
+from .systems import (
+    G,
+    bouncing_ball,
+    clipped_clock,
+    cubed_clock,
+    grazing_oscillator,
+    late_clock,
+    two_clocks,
+)
 
 BACKENDS = ("engine", "scipy")
 
@@ -89,6 +97,35 @@ def test_the_final_time_rule_on_both_sides_of_its_boundary(backend, past_end, ju
     assert len(sol.jumps) == jumps, sol.jumps.t
     np.testing.assert_allclose(sol.jumps.t, [1.5, 3.0][:jumps], atol=2 * xtol)
     assert sol.t_final[0] == t_end
+
+
+def test_two_crossings_between_the_same_samples_jump_at_the_earlier_root(backend):
+    # guards against: the later of two roots in one bracket taken (the reference is the
+    # oracle of every agreement test). Clocks of periods 1 and 1 + 1e-4 cross 1e-4 s
+    # apart, inside one sub-interval of the long steps of a constant flow: each rule
+    # jumps at its own closed-form time, rule 0 first.
+    sol = solve(two_clocks(1.0, 1.0 + 1e-4), [0.0, 0.0], (0.0, 2.5), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    assert sol.n_steps[0] < 20  # long steps: both crossings lie between the same samples
+    log = sol.jumps
+    assert log.rule.tolist() == [0, 1, 0, 1]
+    np.testing.assert_allclose(log.t, [1.0, 1.0001, 2.0, 2.0002], rtol=0, atol=5e-12)
+
+
+@pytest.mark.parametrize("period", [0.3, 15.0, 40.0])
+def test_jump_times_are_within_event_xtol_on_long_steps(backend, period):
+    # guards against: the event tolerance no longer scaled by the step length (a bracket
+    # of event_xtol in the step's unit interval is h * event_xtol in time: 15x on a 15 s
+    # step). The guard (tau - period)^3 has zero slope at its root, so the located time
+    # is as good as the bracket; each jump is at most event_xtol after the entry.
+    xtol = 1e-6
+    options = SolverOptions(event_xtol=xtol)
+    sol = solve(cubed_clock(period), [0.0], (0.0, 3.5 * period), options=options, backend=backend)
+    assert sol.status_labels() == ["completed"]
+    assert len(sol.jumps) == 3
+    late = np.diff(np.concatenate([[0.0], sol.jumps.t])) - period
+    assert np.all(late >= -1e-12 * period), late
+    assert np.all(late <= xtol), late / xtol
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])

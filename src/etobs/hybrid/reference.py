@@ -76,6 +76,10 @@ def brentq(*args: Any, **kwargs: Any) -> Any:
 # set, as in the engine.
 _NUDGES = 64
 
+# brentq's bound on iterations: bisection alone halves [a, b] to xtol in under 1100 steps
+# from any float interval (brentq's default, 100, failed on a zero-slope root)
+_ROOT_ITERATIONS = 1100
+
 
 def solve_reference(
     system: HybridSystem | BatchedSystem,
@@ -265,20 +269,15 @@ class _Run:
         # ends on its flow at t_end (docs/solver.md, "Jumps at the final time")
         cutoff = self.t_end - o.event_xtol
         events = self.events if self.t <= cutoff else None
-        first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
-        method = _budgeted_dop853(o.max_steps - self.n_steps)
-        sol = solve_ivp(
-            self.fun,
-            (self.t, self.t_end),
-            self.x,
-            method=method,
-            rtol=o.rtol,
-            atol=o.atol,
-            max_step=o.max_step,
-            events=events,
-            dense_output=True,
-            **first,
-        )
+        try:
+            sol, method = self.integrate(events)
+        except RuntimeError as exc:
+            # solve_ivp's own event location (brentq, 100 iterations to 4 eps) fails on an
+            # event function with zero slope at its root ((tau - 1)^3): integrate without
+            # its events; the scan below finds the crossing on the dense output
+            if "converge" not in str(exc):
+                raise
+            sol, method = self.integrate(None)
         self.n_steps += sol.t.size - 1
         if sol.status == -1:
             # Report where the integration actually stopped, like the engine.
@@ -326,6 +325,25 @@ class _Run:
         if status is Status.RUNNING and self.n_steps >= o.max_steps and self.t < self.t_end:
             return Status.MAX_STEPS
         return status
+
+    def integrate(self, events: Any) -> tuple[Any, Any]:
+        """``solve_ivp`` from the current state to ``t_end``, stopping at ``events``; and its method."""
+        o = self.opts
+        first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
+        method = _budgeted_dop853(o.max_steps - self.n_steps)
+        sol = solve_ivp(
+            self.fun,
+            (self.t, self.t_end),
+            self.x,
+            method=method,
+            rtol=o.rtol,
+            atol=o.atol,
+            max_step=o.max_step,
+            events=events,
+            dense_output=True,
+            **first,
+        )
+        return sol, method
 
     def scan(self, dense: Any, t_start: float, g0: np.ndarray) -> tuple[float, float] | None:
         """First sampled crossing on the steps of ``dense``, as a bracket, or None.
@@ -382,6 +400,7 @@ class _Run:
                 b,
                 xtol=self.opts.event_xtol / 4,
                 rtol=4 * np.finfo(float).eps,
+                maxiter=_ROOT_ITERATIONS,
             )
             best = min(best, r)
         for _ in range(_NUDGES):
