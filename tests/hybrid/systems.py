@@ -128,3 +128,17 @@ def cubed_clock(period):
     return HybridSystem(
         n=1, n_rules=1, flow=_clock_rate, guard=_cubed_guard, jump=_reset_all, params=[period]
     )
+
+
+def _two_levels(t, x, p):
+    # sin(t) - level and sin(t + d) - level on x = (sin t, cos t)
+    return np.array([x[0] - p[0], x[0] * np.cos(p[1]) + x[1] * np.sin(p[1]) - p[0]])
+
+
+def twin_grazers(level=0.999, d=1e-4):
+    """x = (sin t, cos t); rule 0 is above ``level`` around pi/2, rule 1 ``d`` s earlier.
+
+    Both excursions (2 arccos(level) ~ 0.089 s) start ``d`` apart inside one step, with
+    no sign change at its ends: found by sampling, both in one bracket.
+    """
+    return HybridSystem(n=2, n_rules=2, flow=_rotation, guard=_two_levels, jump=_mirror, params=[level, d])

@@ -19,6 +19,7 @@ from .systems import (
     cubed_clock,
     grazing_oscillator,
     late_clock,
+    twin_grazers,
     two_clocks,
 )
 
@@ -106,10 +107,23 @@ def test_two_crossings_between_the_same_samples_jump_at_the_earlier_root(backend
     # jumps at its own closed-form time, rule 0 first.
     sol = solve(two_clocks(1.0, 1.0 + 1e-4), [0.0, 0.0], (0.0, 2.5), backend=backend)
     assert sol.status_labels() == ["completed"]
-    assert sol.n_steps[0] < 20  # long steps: both crossings lie between the same samples
     log = sol.jumps
     assert log.rule.tolist() == [0, 1, 0, 1]
     np.testing.assert_allclose(log.t, [1.0, 1.0001, 2.0, 2.0002], rtol=0, atol=5e-12)
+    assert sol.n_steps[0] < 20  # long steps: both crossings lie between the same samples
+
+
+def test_two_excursions_found_between_the_same_samples_jump_at_the_earlier_root(backend):
+    # the same inside one step: no sign change at the step ends, so the sampled bracket
+    # (not solve_ivp's own event) holds both crossings; rule 1 (sin(t + d) > level) enters
+    # first, at arcsin(level) - d
+    level, d = 0.999, 1e-4
+    sol = solve(twin_grazers(level, d), [0.0, 1.0], (0.0, 1.6), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    log = sol.jumps
+    assert log.rule.tolist() == [1]
+    # the grazing crossing (speed 0.045) turns a state error of rtol into 2e-9 s
+    assert log.t[0] == pytest.approx(np.arcsin(level) - d, abs=1e-8)
 
 
 @pytest.mark.parametrize("period", [0.3, 15.0, 40.0])
