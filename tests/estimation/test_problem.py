@@ -276,3 +276,23 @@ def test_sigma_c_of_one_or_more_warns_naming_the_node():
         RuntimeWarning, match=r"node 0 \('sensor 1'\): sigma\*c = 1000\*0.001 = 1 >= 1: Theorem 1"
     ):
         robot_arm(sigma=(1000.0, 600.0))
+
+
+def test_an_estimation_run_ending_zeno_gets_the_estimation_layers_advice():
+    # the generic solver speaks of guards and jumps; the estimation result adds eps and
+    # Theorem 4 (before: the generic solver's message held them, for any hybrid system)
+    from etobs.hybrid import SolverOptions
+    from etobs.model import StaticRule
+
+    p = Plant(f_p=lambda t, x, u, v: np.cos(t) + 0 * x, h=lambda x: x.copy(), n_x=1, n_y=1)
+    o = Observer(f_o=lambda t, z, u, ybar, yhat: ybar - z, n_z=1)
+    pb = EstimationProblem(p, o, [Node((0,), StaticRule(gamma=Quadratic(1.0), eps=1e-300))])
+    res = simulate(
+        pb, [1.0], 1.0, backend="scipy", options=SolverOptions(zeno_jumps=50), save=SaveAt(steps=False)
+    )
+    assert res.status_labels() == ["zeno"]
+    (message,) = res.messages()
+    assert "every jump map leaves its guard's jump set" in message
+    assert "The jumps are transmissions: check that every eps is > 0" in message
+    assert "Theorem 4" in message
+    assert "eps" not in res.solution.messages()[0]

@@ -9,7 +9,7 @@ purpose: without the limits these runs would not end within any test timeout.
 import numpy as np
 import pytest
 
-from etobs.hybrid import HybridSystem, SaveAt, SolverOptions, solve
+from etobs.hybrid import HybridSystem, SaveAt, SolverOptions, Status, solve, status_message
 from etobs.hybrid.zeno import zeno_window
 
 from .systems import G, bouncing_ball, two_clocks
@@ -207,3 +207,21 @@ def test_a_nan_event_function_at_the_start_ends_the_run(backend):
     assert sol.status_labels() == ["model_error"]
     assert sol.t_final[0] == 0.0
     assert sol.failures[0].startswith("`guard` returned NaN")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_plain_hybrid_system_ending_zeno_gets_advice_on_guards_not_nodes(backend):
+    # before: "check that every eps is > 0 ... (Theorem 4's minimum inter-event time ...)",
+    # advice about observer nodes for a bouncing ball that has none
+    sol = _solve(bouncing_ball(0.5), [1.0, 0.0], 10.0, backend)
+    (message,) = sol.messages()
+    assert "every jump map leaves its guard's jump set" in message
+    for word in ("eps", "node", "gamma", "Theorem", "transmission"):
+        assert word not in message, f"{word!r} in a plain hybrid system's message: {message}"
+
+
+def test_a_layer_above_adds_its_advice_to_the_generic_message():
+    text = status_message(Status.ZENO, 2.0, advice={Status.ZENO: "Check the model's eps"})
+    assert text.startswith("stopped at t=2: the jumps piled up in time")
+    assert text.endswith("`zeno_jumps`/`zeno_span`. Check the model's eps")
+    assert status_message(Status.MAX_STEPS, advice={Status.ZENO: "x"}) == status_message(Status.MAX_STEPS)

@@ -1,8 +1,10 @@
 """The reference backend evaluates the guard once per point, whatever the number of rules."""
 
 import numpy as np
+import pytest
 
-from etobs.hybrid import HybridSystem, solve_reference
+from etobs.errors import ModelError
+from etobs.hybrid import HybridSystem, reference, solve_reference
 
 from .systems import bouncing_ball
 
@@ -44,3 +46,19 @@ def test_guard_calls_do_not_grow_with_the_number_of_rules():
     np.testing.assert_array_equal(a.x_final, b.x_final)
     # and the wrapped system gives the ball's own results
     np.testing.assert_array_equal(a.jumps.t, solve_reference(ball, [1.0, 0.0], (0.0, 1.2)).jumps.t)
+
+
+def test_a_nan_guard_is_the_states_failure_at_an_overflowed_state_and_the_guards_at_a_finite_one():
+    # the reference's rule (the engine draws the same line in _locate): before, a blow-up
+    # ended model_error ("`guard` returned NaN") or nonfinite by the machine's
+    # floating-point path for huge arguments
+    nan = np.array([[np.nan, -1.0]])
+    with pytest.raises(reference._Overflowed):
+        reference._event_values(nan, np.array([[1.0, np.inf]]), 2)
+    with pytest.raises(ModelError, match="`guard` returned NaN"):
+        reference._event_values(nan, np.array([[1.0, 1e300]]), 2)
+    # only the rows where the guard is NaN count: a finite row there is the guard's fault
+    two = np.array([[np.nan, -1.0], [-1.0, -1.0]])
+    with pytest.raises(ModelError, match="`guard` returned NaN"):
+        reference._event_values(two, np.array([[1.0, 2.0], [np.inf, 0.0]]), 2)
+    np.testing.assert_array_equal(reference._event_values(-np.ones((1, 2)), np.array([[np.inf, 0.0]]), 2), -1)

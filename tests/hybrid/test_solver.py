@@ -12,7 +12,16 @@ import pytest
 from etobs.errors import InputError
 from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Status, solve
 
-from .systems import G, bouncing_ball, grazing_oscillator, two_clocks
+from .systems import (
+    G,
+    bouncing_ball,
+    clipped_clock,
+    cubed_clock,
+    grazing_oscillator,
+    late_clock,
+    twin_grazers,
+    two_clocks,
+)
 
 BACKENDS = ("engine", "scipy")
 
@@ -47,6 +56,90 @@ def test_bouncing_ball_impact_times_match_closed_form(backend):
     assert sol.status.tolist() == [Status.COMPLETED]
     assert sol.backend == backend
     assert sol.rule_names == ("impact",)
+
+
+def test_entry_into_a_jump_set_where_the_guard_is_flat_at_zero_is_exact(backend):
+    # min(tau - 1, 0) is 0 on all of tau >= 1: every point there is a root of the guard.
+    # Before, the reference's brentq stopped at whichever it met: jumps at 1.0106,
+    # 2.1242, 3.1396 (the engine and the closed form: 1, 2, 3)
+    xtol = SolverOptions().event_xtol
+    sol = solve(clipped_clock(1.0), [0.0], (0.0, 3.5), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    t = sol.jumps.t
+    assert len(t) == 3
+    # each jump is at most event_xtol after the entry, and the clock restarts there
+    periods = np.diff(np.concatenate([[0.0], t]))
+    assert np.all(periods >= 1.0 - 1e-14), periods - 1.0
+    assert np.all(periods <= 1.0 + xtol), periods - 1.0
+
+
+def test_a_jump_due_at_the_final_time_is_not_applied_on_either_backend(backend):
+    # min(t - 1.5, tau - 0.5) >= 0: jumps at 1.5, 2, 2.5, 3. Before, the one at t_end = 3
+    # was kept by the reference (3.0) and dropped by the engine (its clock 5e-13 late):
+    # kept or dropped by rounding. Rule (docs/solver.md): a jump within event_xtol of
+    # t_end is not applied, and the run ends on its flow at t_end.
+    sol = solve(late_clock(1.5, 0.5), [0.0], (0.0, 3.0), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    np.testing.assert_allclose(sol.jumps.t, [1.5, 2.0, 2.5], atol=1e-11)
+    assert sol.t_final[0] == 3.0
+    assert sol.x_final[0, 0] == pytest.approx(0.5, abs=1e-11)  # flowed on, not reset
+
+
+@pytest.mark.parametrize(("past_end", "jumps"), [(-0.5, 1), (0.5, 1), (5.0, 2)])
+def test_the_final_time_rule_on_both_sides_of_its_boundary(backend, past_end, jumps):
+    # jumps at 1.5 and 3: with t_end = 3 + past_end * event_xtol the jump at 3 is applied
+    # only when it is more than event_xtol before t_end (a coarse event_xtol keeps the
+    # boundary far from rounding)
+    xtol = 1e-6
+    options = SolverOptions(event_xtol=xtol)
+    t_end = 3.0 + past_end * xtol
+    sol = solve(late_clock(1.5, 1.5), [0.0], (0.0, t_end), options=options, backend=backend)
+    assert sol.status_labels() == ["completed"]
+    assert len(sol.jumps) == jumps, sol.jumps.t
+    np.testing.assert_allclose(sol.jumps.t, [1.5, 3.0][:jumps], atol=2 * xtol)
+    assert sol.t_final[0] == t_end
+
+
+def test_two_crossings_between_the_same_samples_jump_at_the_earlier_root(backend):
+    # guards against: the later of two roots in one bracket taken (the reference is the
+    # oracle of every agreement test). Clocks of periods 1 and 1 + 1e-4 cross 1e-4 s
+    # apart, inside one sub-interval of the long steps of a constant flow: each rule
+    # jumps at its own closed-form time, rule 0 first.
+    sol = solve(two_clocks(1.0, 1.0 + 1e-4), [0.0, 0.0], (0.0, 2.5), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    log = sol.jumps
+    assert log.rule.tolist() == [0, 1, 0, 1]
+    np.testing.assert_allclose(log.t, [1.0, 1.0001, 2.0, 2.0002], rtol=0, atol=5e-12)
+    assert sol.n_steps[0] < 20  # long steps: both crossings lie between the same samples
+
+
+def test_two_excursions_found_between_the_same_samples_jump_at_the_earlier_root(backend):
+    # the same inside one step: no sign change at the step ends, so the sampled bracket
+    # (not solve_ivp's own event) holds both crossings; rule 1 (sin(t + d) > level) enters
+    # first, at arcsin(level) - d
+    level, d = 0.999, 1e-4
+    sol = solve(twin_grazers(level, d), [0.0, 1.0], (0.0, 1.6), backend=backend)
+    assert sol.status_labels() == ["completed"]
+    log = sol.jumps
+    assert log.rule.tolist() == [1]
+    # the grazing crossing (speed 0.045) turns a state error of rtol into 2e-9 s
+    assert log.t[0] == pytest.approx(np.arcsin(level) - d, abs=1e-8)
+
+
+@pytest.mark.parametrize("period", [0.3, 15.0, 40.0])
+def test_jump_times_are_within_event_xtol_on_long_steps(backend, period):
+    # guards against: the event tolerance no longer scaled by the step length (a bracket
+    # of event_xtol in the step's unit interval is h * event_xtol in time: 15x on a 15 s
+    # step). The guard (tau - period)^3 has zero slope at its root, so the located time
+    # is as good as the bracket; each jump is at most event_xtol after the entry.
+    xtol = 1e-6
+    options = SolverOptions(event_xtol=xtol)
+    sol = solve(cubed_clock(period), [0.0], (0.0, 3.5 * period), options=options, backend=backend)
+    assert sol.status_labels() == ["completed"]
+    assert len(sol.jumps) == 3
+    late = np.diff(np.concatenate([[0.0], sol.jumps.t])) - period
+    assert np.all(late >= -1e-12 * period), late
+    assert np.all(late <= xtol), late / xtol
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])

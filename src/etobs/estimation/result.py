@@ -10,10 +10,26 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.solution import HybridSolution, JumpLog
+from etobs.hybrid.status import Status
 
 if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
+
+
+#: What a failed run's message adds in the estimation layer's terms (the generic solver's
+#: messages speak of guards and jumps; here a jump is a transmission).
+STATUS_ADVICE = {
+    Status.MAX_JUMPS: (
+        "The jumps are transmissions: many transmissions (a short period, a tiny eps, or a "
+        "state that grows without bound) end a run so"
+    ),
+    Status.ZENO: (
+        "The jumps are transmissions: check that every eps is > 0 and not tiny next to "
+        "gamma(|e|) (Theorem 4's minimum inter-event time is gamma_i^-1(eps_i) / E) and that no "
+        "rule stays in its jump set after its own transmission"
+    ),
+}
 
 
 @dataclass(frozen=True)
@@ -271,7 +287,7 @@ class EstimationResult:
 
     def messages(self) -> list[str]:
         """How each run ended, with the fix for failures."""
-        return self.solution.messages()
+        return self.solution.messages(STATUS_ADVICE)
 
     def transmission_times(self, run: int, node: int) -> np.ndarray:
         """Transmission times of ``node`` in ``run``."""

@@ -239,12 +239,13 @@ def not_completed(statuses: Iterable[str]) -> str:
 
 def status_notes(statuses: Iterable[str]) -> list[str]:
     """One line per status other than ``completed`` that occurs: what it means and how to fix it."""
+    from etobs.estimation.result import STATUS_ADVICE
     from etobs.hybrid.status import Status, status_message
 
     out = []
     for label in sorted(set(statuses) - {"completed"}):
         try:
-            out.append(f"`{label}`: {status_message(Status[label.upper()])}")
+            out.append(f"`{label}`: {status_message(Status[label.upper()], advice=STATUS_ADVICE)}")
         except KeyError:  # a record written by another version
             out.append(f"`{label}`: a status this version of etobs does not know")
     return out

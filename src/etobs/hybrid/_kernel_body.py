@@ -372,6 +372,13 @@ def _solve_one(
             if failed(args):  # the guard or the dense output failed: keep the last good state
                 accept = False
                 st = MODEL_ERROR
+            elif theta_ev == -np.inf:  # the dense state overflowed where the guard was NaN
+                accept = False
+                st = NONFINITE
+            # a jump due at the final time (within event_xtol of it) is not applied: the run
+            # ends on its flow at t_end (docs/solver.md, "Jumps at the final time")
+            if np.isfinite(theta_ev) and t_start + theta_ev * hh > t_end - xtol_t:
+                theta_ev = np.nan
         if accept:
             t_stop = t1
             if np.isfinite(theta_ev) and theta_ev < 1.0:
@@ -641,9 +648,14 @@ def _locate(args, p, t0, h, x0, Q, nq, dop853, g0, g1, gl, gtmp, S, th_s, gs, se
             _dense_eval(Q, nq, dop853, x0, probe, xs)
             guard_call(t0 + probe * h, xs, p, args, gp + 8 * m * pos)
             ns += 1
-    # a NaN event function never fires: the run must not go on as if it were negative
+    # a NaN event function never fires: the run must not go on as if it were negative.
+    # At a state that has overflowed it is the state's failure (-inf: nonfinite), at a
+    # finite state the guard's (model_error), on both solvers
     for i in range(ns):
         if _any_nan(gs[i]):
+            _dense_eval(Q, nq, dop853, x0, th_s[i], xs)
+            if not _all_finite(xs):
+                return -np.inf
             store_i64(args[6], GUARD_NAN)
             return np.nan
     # first sample with any g >= 0
@@ -693,6 +705,8 @@ def _bracket_root(args, p, t0, h, x0, Q, nq, dop853, k, lo, hi, f_lo, f_hi, xtol
         guard_call(t0 + x * h, xs, p, args, gtmp)
         fx = gtmp[k]
         if np.isnan(fx):
+            if not _all_finite(xs):  # the state overflowed (see _locate)
+                return -np.inf
             store_i64(args[6], GUARD_NAN)
             break
         if fx >= 0:

@@ -76,6 +76,10 @@ def brentq(*args: Any, **kwargs: Any) -> Any:
 # set, as in the engine.
 _NUDGES = 64
 
+# brentq's bound on iterations: bisection alone halves [a, b] to xtol in under 1100 steps
+# from any float interval (brentq's default, 100, failed on a zero-slope root)
+_ROOT_ITERATIONS = 1100
+
 
 def solve_reference(
     system: HybridSystem | BatchedSystem,
@@ -115,6 +119,8 @@ def solve_reference(
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             try:
                 status[b] = run.solve()
+            except _Overflowed:
+                status[b] = Status.NONFINITE
             except ModelError as exc:  # a model function failed: this run ends, the others go on
                 status[b], failures[b] = Status.MODEL_ERROR, str(exc)
         t_final[b], j_final[b], x_final[b], n_steps[b] = run.t, run.j, run.x, run.n_steps
@@ -200,13 +206,15 @@ class _Run:
         if x is last_x and t == last_t:
             return last_g
         # a copy: the values are remembered, whatever the guard does with its output
-        g = _event_values(_call("guard", self.sys.guard, np.array((t,)), x[None]), (1, self.sys.n_rules))[0]
+        g = _event_values(_call("guard", self.sys.guard, np.array((t,)), x[None]), x[None], self.sys.n_rules)[
+            0
+        ]
         self.last = (t, x, g)
         return g
 
     def gk(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Event functions at many points, t (K,), x (K, n) -> (K, m)."""
-        return _event_values(_call("guard", self.sys.guard, t, x), (t.shape[0], self.sys.n_rules))
+        return _event_values(_call("guard", self.sys.guard, t, x), x, self.sys.n_rules)
 
     def at(self, dense: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
         """State and event functions at ``t`` on the dense output of this segment."""
@@ -257,20 +265,19 @@ class _Run:
     def segment(self) -> Status:
         """Flow from the current state to the next event (or the end), then jump."""
         o = self.opts
-        first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
-        method = _budgeted_dop853(o.max_steps - self.n_steps)
-        sol = solve_ivp(
-            self.fun,
-            (self.t, self.t_end),
-            self.x,
-            method=method,
-            rtol=o.rtol,
-            atol=o.atol,
-            max_step=o.max_step,
-            events=self.events,
-            dense_output=True,
-            **first,
-        )
+        # a jump due at the final time (within event_xtol of it) is not applied: the run
+        # ends on its flow at t_end (docs/solver.md, "Jumps at the final time")
+        cutoff = self.t_end - o.event_xtol
+        events = self.events if self.t <= cutoff else None
+        try:
+            sol, method = self.integrate(events)
+        except RuntimeError as exc:
+            # solve_ivp's own event location (brentq, 100 iterations to 4 eps) fails on an
+            # event function with zero slope at its root ((tau - 1)^3): integrate without
+            # its events; the scan below finds the crossing on the dense output
+            if "converge" not in str(exc):
+                raise
+            sol, method = self.integrate(None)
         self.n_steps += sol.t.size - 1
         if sol.status == -1:
             # Report where the integration actually stopped, like the engine.
@@ -289,7 +296,7 @@ class _Run:
             bracket = (float(sol.t[-2]) if sol.t.size > 1 else self.t, t_hit)
         # Guard: sample every step (and probe predicted peaks); an earlier crossing
         # overrides solve_ivp's event.
-        if self.events:
+        if events:
             early = self.scan(dense, float(self.t), self.g_start)
             if early is not None and (bracket is None or early[1] < bracket[1]):
                 bracket = early
@@ -312,10 +319,31 @@ class _Run:
         if bracket is None:
             self.t = self.t_end
             return Status.RUNNING
+        if t_stop > cutoff:  # flow on to t_end, without events
+            return Status.RUNNING
         status = self.jumps()
         if status is Status.RUNNING and self.n_steps >= o.max_steps and self.t < self.t_end:
             return Status.MAX_STEPS
         return status
+
+    def integrate(self, events: Any) -> tuple[Any, Any]:
+        """``solve_ivp`` from the current state to ``t_end``, stopping at ``events``; and its method."""
+        o = self.opts
+        first = {"first_step": min(o.first_step, self.t_end - self.t)} if o.first_step else {}
+        method = _budgeted_dop853(o.max_steps - self.n_steps)
+        sol = solve_ivp(
+            self.fun,
+            (self.t, self.t_end),
+            self.x,
+            method=method,
+            rtol=o.rtol,
+            atol=o.atol,
+            max_step=o.max_step,
+            events=events,
+            dense_output=True,
+            **first,
+        )
+        return sol, method
 
     def scan(self, dense: Any, t_start: float, g0: np.ndarray) -> tuple[float, float] | None:
         """First sampled crossing on the steps of ``dense``, as a bracket, or None.
@@ -367,11 +395,12 @@ class _Run:
         best = b
         for k in np.flatnonzero((ga < 0) & (gb >= 0)):
             r = brentq(
-                lambda s, k=k: float(self.at(dense, s)[1][k]),
+                lambda s, k=k: _entered(float(self.at(dense, s)[1][k])),
                 a,
                 b,
                 xtol=self.opts.event_xtol / 4,
                 rtol=4 * np.finfo(float).eps,
+                maxiter=_ROOT_ITERATIONS,
             )
             best = min(best, r)
         for _ in range(_NUDGES):
@@ -379,6 +408,22 @@ class _Run:
                 break
             best = min(best + self.opts.event_xtol / 4, self.t_end)
         return best
+
+
+def _entered(g: float) -> float:
+    """An event function's value for the root finder: 0 (in the jump set) counts as positive.
+
+    The jump set is ``g >= 0``, so the event is the entry into it, not a zero of ``g``. A
+    guard that is exactly 0 on an interval (clipped, ``min(tau - 1, 0)``) has every point
+    of it as a root, and ``brentq`` stopped at whichever it met first: the jumps of a
+    clock of period 1 came at 1.0106, 2.1242, 3.1396. With 0 moved to the smallest
+    positive float there is one sign change, at the entry, and ``brentq`` brackets it to
+    ``xtol`` as the engine's regula falsi does (it too keeps ``g >= 0`` on the right end).
+    """
+    return g if g != 0.0 else _TINY
+
+
+_TINY = float(np.nextafter(0.0, 1.0))
 
 
 def _call(name: str, fn: Any, *args: Any) -> Any:
@@ -407,14 +452,24 @@ def _checked(name: str, out: Any, shape: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
-def _event_values(out: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """The guard's values (a copy, so they are remembered whatever the guard does later).
+class _Overflowed(Exception):
+    """The guard was NaN at a state that is no longer finite: the run ends ``nonfinite``."""
 
-    NaN ends the run with ``model_error``: a NaN event function never fires, and the run
-    went on as if it were negative (a ball fell through its floor and "completed").
+
+def _event_values(out: Any, x: np.ndarray, m: int) -> np.ndarray:
+    """The ``m`` guard values at the states ``x`` (K, n), as (K, m) (a copy: they are remembered).
+
+    NaN ends the run: a NaN event function never fires, and the run went on as if it
+    were negative (a ball fell through its floor and "completed"). At a state with a
+    non-finite entry (a state that overflowed, on the dense output inside a step) the
+    NaN is the state's, and the run ends ``nonfinite``; at a finite state it is the
+    guard's, ``model_error``. The engine draws the same line; before, which of the two
+    a blow-up gave depended on the machine's floating-point path for huge arguments.
     """
-    g = _checked("guard", out, shape).copy()
+    g = _checked("guard", out, (x.shape[0], m)).copy()
     if np.isnan(g).any():
+        if not np.all(np.isfinite(x[np.isnan(g).any(axis=1)])):
+            raise _Overflowed
         raise ModelError("`guard` " + describe_failure_nan())
     return g
 

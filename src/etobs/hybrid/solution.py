@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import html
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple, overload
 
@@ -383,11 +383,15 @@ class HybridSolution:
         """Whether every run completed."""
         return bool(np.all(self.status == Status.COMPLETED))
 
-    def messages(self) -> list[str]:
-        """One sentence per run saying how it ended and, on failure, how to fix it."""
+    def messages(self, advice: Mapping[Status, str] | None = None) -> list[str]:
+        """One sentence per run saying how it ended and, on failure, how to fix it.
+
+        ``advice`` adds a sentence per status in the terms of the layer that built the
+        system (see :func:`~etobs.hybrid.status_message`).
+        """
         details = self.failures or ("",) * self.n_runs
         return [
-            status_message(Status(s), float(t), d, self.backend)
+            status_message(Status(s), float(t), d, self.backend, advice)
             for s, t, d in zip(self.status, self.t_final, details, strict=True)
         ]
 

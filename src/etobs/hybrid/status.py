@@ -7,6 +7,7 @@ never stops the others. :func:`status_message` explains each status and how to f
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 
 
 class Status(enum.IntEnum):
@@ -37,8 +38,8 @@ _MESSAGES = {
     Status.COMPLETED: "the run reached the end of the horizon",
     Status.MAX_JUMPS: (
         "the run reached its limit on the number of jumps before the end of the horizon: "
-        "many transmissions (a short period, a tiny eps, or a state that grows without bound) "
-        "rather than jumps piling up at one instant, which ends a run with `zeno`; increase "
+        "many jumps (a guard crossed often, or a state that grows without bound) rather than "
+        "jumps piling up at one instant, which ends a run with `zeno`; increase "
         "`SolverOptions(max_jumps=...)` if the jumps are expected"
     ),
     Status.MAX_STEPS: (
@@ -60,9 +61,9 @@ _MESSAGES = {
     Status.ZENO: (
         "the jumps piled up in time: more than `SolverOptions(zeno_jumps=...)` jumps within "
         "`zeno_span * max(1, |t|)` seconds (Zeno behaviour, or jumps closer together than the "
-        "solver resolves in time). Check that every eps is > 0 and not tiny next to gamma(|e|) "
-        "(Theorem 4's minimum inter-event time is gamma_i^-1(eps_i) / E), that no rule stays "
-        "in its jump set after its own jump, or change `zeno_jumps`/`zeno_span`"
+        "solver resolves in time). Check that every jump map leaves its guard's jump set "
+        "(guard < 0 after the jump) and that the guards are not crossed ever faster, or change "
+        "`zeno_jumps`/`zeno_span`"
     ),
 }
 
@@ -77,17 +78,29 @@ _REFERENCE_MESSAGES = {
 }
 
 
-def status_message(status: Status, t: float | None = None, detail: str = "", backend: str = "") -> str:
+def status_message(
+    status: Status,
+    t: float | None = None,
+    detail: str = "",
+    backend: str = "",
+    advice: Mapping[Status, str] | None = None,
+) -> str:
     """Return a sentence describing ``status`` (with the stopping time when given).
 
     ``detail`` (e.g. which function failed) is put before the general explanation;
     ``backend`` is the solver that ran (``"scipy"``'s advice differs from the engine's).
+    The messages speak of guards and jumps: this layer knows nothing of what they model.
+    ``advice`` maps a status to a sentence that a layer above adds in its own terms
+    (the estimation layer: eps, transmissions and Theorem 4 for ``zeno``).
     """
     text = _MESSAGES[Status(status)]
     if backend == "scipy":
         text = _REFERENCE_MESSAGES.get(Status(status), text)
     if detail:
         text = f"{detail}; {text}"
+    extra = (advice or {}).get(Status(status))
+    if extra:
+        text = f"{text}. {extra}"
     if t is not None and status != Status.COMPLETED:
         return f"stopped at t={t:.6g}: {text}"
     return text
