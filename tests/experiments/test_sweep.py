@@ -209,22 +209,10 @@ def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_
 
     store = ResultStore(tmp_path)
     key = task_key(failing, 0)
-    ok_records = run_sweep(
-        parse_spec(raw_spec(rows=[{"k": 1.0}])), tmp_path / "ok", executor="serial", progress=False
-    ).runs
-    recs = [
-        {
-            "run": r["run"],
-            "status": r["status"],
-            "transmissions": [r["transmissions"]],
-            "error": r["error"],
-            "min_inter_event_time": [None],
-            "x0": [0.0],
-            "steps": 1,
-        }
-        for r in ok_records
-        if r["scenario"] == "coarse"
-    ]
+    ok = parse_spec(raw_spec(rows=[{"k": 1.0}]))
+    run_sweep(ok, tmp_path / "ok", executor="serial", progress=False)
+    coarse = ResultStore(tmp_path / "ok").records(task_key(ok, 0), 5)  # whole records, as run_task writes
+    recs = [coarse[r] for r in range(5)]
     store.write(key, tuple(range(5)), recs)  # one chunk of 5 covering the 3 failed chunks of 2
     again = run_sweep(failing, tmp_path, executor="serial", chunk=5, progress=False)
     # 'fine' still fails: one standing failure (the chunk of 5 supersedes the three older
