@@ -25,6 +25,13 @@ from etobs.cli.main import main
 LINEAR = '"tests.estimation.linear:factory"'
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp_path(tmp_path, monkeypatch):
+    """Run every command here in its temporary folder: a default output folder (``sweep``
+    without ``--out`` writes ``sweep-NAME``) lands there, never in the checkout."""
+    monkeypatch.chdir(tmp_path)
+
+
 def sweep_spec(factory=LINEAR, params="{}", number="1.0", top=""):
     return (
         f'{top}name = "bad"\n[system]\nfactory = {factory}\nfixed = {params}\n'
@@ -181,6 +188,7 @@ def test_a_closed_stdout_pipe_ends_quietly_with_status_141(tmp_path):
         [sys.executable, "-m", "etobs", "check", "robot_arm", "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        cwd=tmp_path,
     )
     proc.stdout.close()  # the reader leaves before anything is written
     try:
@@ -243,7 +251,11 @@ def test_the_installed_command_prints_one_line_and_no_traceback(tmp_path):
     spec = tmp_path / "spec.toml"
     spec.write_bytes(b'name = "\xff"\n')
     out = subprocess.run(
-        [sys.executable, "-m", "etobs", "sweep", str(spec)], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "etobs", "sweep", str(spec)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,  # without --out a sweep writes sweep-NAME in the current folder
     )
     assert out.returncode == 2
     assert out.stderr == f"etobs: error: spec file '{spec}' is not UTF-8 text: byte 8 is 0xff\n"
@@ -326,7 +338,7 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
         "--executor",
         "serial",
     ]
-    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     try:
         for _ in range(1200):  # the factory is called once the sweep is under way (at most 120 s)
             if started.exists() or proc.poll() is not None:
