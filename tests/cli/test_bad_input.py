@@ -113,8 +113,6 @@ SPEC_CASES = [
         r"`sigma` must be a real number; got 'big'",
     ),
 ]
-#: A sweep calls its factory in the workers: there a wrong value fails the chunk (exit 1).
-IN_THE_WORKERS = {("sweep", "a factory argument of the wrong type")}
 
 
 def run(argv, capsys):
@@ -136,8 +134,6 @@ def one_clear_line(code, lines):
 @pytest.mark.parametrize("command", list(COMMANDS))
 @pytest.mark.parametrize(("case", "write", "says"), SPEC_CASES, ids=[c[0] for c in SPEC_CASES])
 def test_every_spec_mistake_is_one_line_naming_the_file(command, case, write, says, tmp_path, capsys):
-    if (command, case) in IN_THE_WORKERS:
-        return  # test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it
     writer, extra, key = COMMANDS[command]
     spec = tmp_path / "spec.toml"
     if write == "DIR":
@@ -148,19 +144,6 @@ def test_every_spec_mistake_is_one_line_naming_the_file(command, case, write, sa
     line = one_clear_line(*run([command, str(spec), *extra], capsys))
     assert str(spec) in line
     assert re.search(says.format(key=re.escape(key)), line), line
-
-
-def test_a_wrong_factory_argument_fails_the_sweep_chunks_naming_it(tmp_path, capsys):
-    spec = tmp_path / "spec.toml"
-    spec.write_text(sweep_spec(params='{ sigma = "big" }'))
-    code = main(["sweep", str(spec), "--out", str(tmp_path / "out"), "--executor", "serial"])
-    assert code == 1
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    assert re.search(
-        r"failed: runs 0..0 of chunk \w+: `system.fixed.sigma` \(row 0, scenario 'default'\): `sigma` must be a real",
-        err,
-    )
 
 
 @pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")

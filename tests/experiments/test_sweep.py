@@ -97,6 +97,20 @@ def test_factory_errors_name_the_problem(tmp_path):
         bad.problem(0)
 
 
+def test_a_value_the_model_refuses_is_refused_before_any_run_naming_its_key(tmp_path):
+    # before: each chunk of row 1 failed in the workers, and row 0 ran (compare refused it up front)
+    bad = parse_spec(raw_spec(rows=[{"sigma": 0.0}, {"sigma": -0.1}]))
+    with pytest.raises(
+        SpecError, match=r"^`rows\[1\].sigma` \(row 1, scenario 'coarse'\): `sigma` must be >= 0; got -0.1$"
+    ):
+        run_sweep(bad, tmp_path / "out", executor="serial", progress=False)
+    assert not (tmp_path / "out").exists()  # nothing run, nothing written
+    parse_spec(raw_spec(rows=[{"sigma": 0.0}])).check()  # sigma = 0 (the static rule) is accepted
+    refused = parse_spec(raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "refuse": True}]))
+    with pytest.raises(SpecError, match=r"failed on the arguments of row 1, scenario 'coarse': ValueError"):
+        refused.check()
+
+
 def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
     marker = tmp_path / "died"
     spec = parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"die_marker": str(marker)}}))

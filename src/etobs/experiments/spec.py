@@ -10,6 +10,7 @@ are parsed by :func:`etobs.experiments.common.parse_common`.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -130,8 +131,20 @@ class SweepSpec(Experiment):
         return {**super().resolved(), "fixed": self.fixed, "rows": list(self.rows), "scenarios": scenarios}
 
     def check(self) -> None:
-        """Every row's and scenario's keys are arguments of the factory (it is not called)."""
+        """Build every group's problem, so a value the model refuses fails before any run.
+
+        As in a comparison (:meth:`CompareSpec.check`), the values are checked by the
+        classes that take them (a negative ``sigma`` by the rule), reached through the
+        factory; the error names the spec key (``rows[2].sigma``). Groups with the same
+        arguments are built once.
+        """
         check_arguments(self.factory, [(self.where(g), self.kwargs(g)) for g in range(self.n_groups)])
+        built = set()
+        for g in range(self.n_groups):
+            ident = json.dumps(self.group_identity(g), sort_keys=True, default=repr)
+            if ident not in built:
+                built.add(ident)
+                self.problem(g)
 
 
 def load_spec(path: str | Path) -> SweepSpec:
