@@ -37,18 +37,21 @@ def run_task(kind: type[Experiment], raw_spec: dict[str, Any], task: Task) -> li
     any worker. A record holds the run's ``status``, the ``transmissions`` of every
     node (output nodes, then input nodes) in the transmissions window, the ``error``
     ``max |x - xhat|`` on the error window's grid, each node's ``min_inter_event_time``,
-    the initial state ``x0``, the solver's ``steps``, the ``backend`` that ran it, its
+    the plant's initial state ``x0`` (the observer's is
+    ``initial_states.z0``), the solver's ``steps``, the ``backend`` that ran it, its
     share of the chunk's wall ``seconds``, and, with a network, the ``packets`` each
     node sent and those the observer never applied (``not_applied``), over the whole run.
     """
     spec = kind.from_raw(raw_spec)
     problem = spec.problem(task.group)
+    spec.initial_states.check_z0(problem.observer.n_z)  # a comparison's problem() does not check it
     x0 = spec.initial_states.draw(max(task.runs) + 1)[list(task.runs)]
     start = time.perf_counter()
     res = simulate(
         problem,
         x0,
         spec.t_end,
+        z0=spec.initial_states.z0,
         options=spec.options,
         # only max |x - xhat| over the error window's grid is kept, folded during the solve
         save=SaveAt(steps=False, grid=spec.metrics.grid(), max_distance="estimation_error"),

@@ -105,13 +105,15 @@ class SweepSpec(Experiment):
         """
         kwargs = self.kwargs(group)
         try:
-            return build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
+            problem = build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
         except SpecError as exc:
             cause = exc.__cause__
             named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
             if named is None or named not in kwargs or isinstance(cause, SpecError):
                 raise
             raise SpecError(f"`{self.origin(group, named)}` ({self.where(group)}): {cause}") from cause
+        self.initial_states.check_z0(problem.observer.n_z)
+        return problem
 
     def origin(self, group: int, key: str) -> str:
         """The spec key that gives the factory's argument ``key`` in ``group``.
