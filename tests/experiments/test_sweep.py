@@ -279,11 +279,12 @@ def test_bad_chunk_and_numpy_parameters(tmp_path):
 
 def test_dimension_mismatch_is_named(tmp_path):
     spec = parse_spec(raw_spec(initial_states={"low": [0.0, 0.0], "high": [1.0, 1.0], "runs": 2, "seed": 1}))
-    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
-    assert (
-        "`initial_states.low` and `.high` have 2 entries but the plant has n_x = 1"
-        in res.failures[0]["error"]
-    )
+    # refused before any run (it failed every chunk in the workers)
+    with pytest.raises(
+        SpecError, match=r"`initial_states.low` and `.high` have 2 entries but the plant has n_x = 1"
+    ):
+        run_sweep(spec, tmp_path / "out", executor="serial", progress=False)
+    assert not (tmp_path / "out").exists()
 
 
 def test_keys_ignore_how_numbers_are_written(tmp_path):
@@ -378,7 +379,7 @@ def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_
         simulate(spec.problem(0), [[0.5], [0.2]], 1.0, run_ids=[0])
 
 
-def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
+def test_a_string_for_a_switch_is_refused_before_any_run_naming_the_key(tmp_path):
     raw = {
         "name": "switch",
         "system": {"factory": "robot_arm"},
@@ -386,9 +387,11 @@ def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
         "initial_states": {"low": [0.0] * 4, "high": [1.0] * 4, "runs": 1, "seed": 1},
         "horizon": {"t_end": 0.1},
     }
-    res = run_sweep(parse_spec(raw), tmp_path, executor="serial", progress=False)
-    assert not res.complete and res.runs == []
-    assert "`noise` must be true or false; got 'false' (str)" in res.failures[0]["error"]
+    # refused before any run, naming the spec key (it failed the chunk in the workers)
+    with pytest.raises(
+        SpecError, match=r"^`scenarios\[0\].noise` .*: `noise` must be true or false; got 'false' \(str\)"
+    ):
+        run_sweep(parse_spec(raw), tmp_path / "out", executor="serial", progress=False)
 
 
 def _chunk_files(out):

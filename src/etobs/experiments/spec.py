@@ -108,9 +108,12 @@ class SweepSpec(Experiment):
             problem = build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
         except SpecError as exc:
             cause = exc.__cause__
-            named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
-            if named is None or named not in kwargs or isinstance(cause, SpecError):
+            if cause is None or isinstance(cause, SpecError):
                 raise
+            named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
+            if named is None or named not in kwargs:  # the factory's own name for it: list the keys it got
+                given = ", ".join(f"`{self.origin(group, k)}`" for k in kwargs) or "none"
+                raise SpecError(f"{exc} (the spec keys given to the factory: {given})") from cause
             raise SpecError(f"`{self.origin(group, named)}` ({self.where(group)}): {cause}") from cause
         self.initial_states.check_z0(problem.observer.n_z)
         return problem
