@@ -1,6 +1,7 @@
 """Sweep factories for the tests: a cheap scalar system that can misbehave on demand."""
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -22,14 +23,52 @@ def _observer(t, z, u, ybar, yhat, p):
     return -p[0] * z + np.sin(t) + 2.0 * (ybar - yhat)
 
 
+def _in_a_chunk():
+    """Whether the factory is called to run a chunk, not by the spec's up-front check.
+
+    A sweep builds every row's problem before any run (:meth:`SweepSpec.check`); the
+    misbehaviours below stand for a chunk that fails or dies while it runs, so they act
+    only inside :func:`etobs.experiments.runner.run_task`.
+    """
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "run_task":
+            return True
+        frame = frame.f_back
+    return False
+
+
 @etobs.factory
-def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=False, started=""):
+def scalar(
+    k=1.0,
+    eps=0.01,
+    fail=False,
+    delay=0.0,
+    die_marker="",
+    die_always=False,
+    started="",
+    refuse=False,
+    sigma=0.5,
+):
     """x' = -k x + sin t measured by one node; observer xhat' = -k xhat + sin t + 2 (ybar - xhat).
 
-    fail: raise (a chunk that fails); delay: sleep (a slow chunk); die_marker: kill the
-    calling process the first time (a worker that dies), creating the marker file;
-    started: create this file when called (a test knows the sweep is under way).
+    In a chunk only: fail: raise (a chunk that fails); delay: sleep (a slow chunk);
+    die_marker: kill the calling process the first time (a worker that dies), creating
+    the marker file; started: create this file when called (a test knows the sweep is
+    under way). Always: refuse: raise (a row the factory refuses); sigma: the rule's.
     """
+    if refuse:
+        raise ValueError("this row fails on purpose")
+    if _in_a_chunk():
+        _misbehave(fail, delay, die_marker, die_always, started)
+    # k travels as the parameters: every row runs the same compiled functions
+    plant = Plant(f_p=_plant, h=_output, n_x=1, n_y=1, params=[k])
+    obs = Observer(f_o=_observer, n_z=1, params=[k])
+    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=sigma, c=0.1, b=1.0, eps=eps, eta0=1.0)
+    return EstimationProblem(plant, obs, [Node((0,), rule)])
+
+
+def _misbehave(fail, delay, die_marker, die_always, started):
     if fail:
         raise ValueError("this row fails on purpose")
     if started:
@@ -41,11 +80,6 @@ def scalar(k=1.0, eps=0.01, fail=False, delay=0.0, die_marker="", die_always=Fal
     if die_marker and not Path(die_marker).exists():
         Path(die_marker).write_text("died once")
         os._exit(3)
-    # k travels as the parameters: every row runs the same compiled functions
-    plant = Plant(f_p=_plant, h=_output, n_x=1, n_y=1, params=[k])
-    obs = Observer(f_o=_observer, n_z=1, params=[k])
-    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.1, b=1.0, eps=eps, eta0=1.0)
-    return EstimationProblem(plant, obs, [Node((0,), rule)])
 
 
 @etobs.factory

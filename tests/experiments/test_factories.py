@@ -132,7 +132,7 @@ def test_whatever_a_factory_raises_names_the_spec_table(tmp_path):
     with pytest.raises(
         SpecError, match=r"failed on the arguments of row 1: ValueError: this row fails on purpose"
     ):
-        make_problem(FACTORY, {"fail": True}, "row 1")
+        make_problem(FACTORY, {"refuse": True}, "row 1")
 
 
 REEXPORT = """

@@ -131,3 +131,56 @@ def test_more_bad_specs(change, match):
         del raw["rows"]
     with pytest.raises(SpecError, match=match):
         parse_spec(raw)
+
+
+def _with_z0(z0):
+    return raw_spec(initial_states={"low": [-1.0], "high": [1.0], "runs": 2, "seed": 7, "z0": z0})
+
+
+@pytest.mark.parametrize(
+    ("z0", "match"),
+    [
+        (
+            [],
+            r"^`initial_states.z0` must be a non-empty list of numbers \(one per observer state\); got \[\]",
+        ),
+        (0.5, r"^`initial_states.z0` must be a non-empty list of numbers .*; got 0.5"),
+        ([float("inf")], r"^`initial_states.z0\[0\]` must be finite; got inf"),
+        (["a"], r"^`initial_states.z0\[0\]` must be a number; got 'a'"),
+    ],
+)
+def test_a_bad_observer_initial_state_names_its_key(z0, match):
+    with pytest.raises(SpecError, match=match):
+        parse_spec(_with_z0(z0))
+
+
+def test_an_observer_initial_state_of_the_wrong_size_is_refused_before_any_run():
+    # the scalar observer has n_z = 1: two entries are one too many
+    with pytest.raises(
+        SpecError,
+        match=r"^`initial_states.z0` has 2 entries but the observer has n_z = 1; expected 1 numbers$",
+    ):
+        parse_spec(_with_z0([0.0, 0.0])).check()
+    parse_spec(_with_z0([0.0])).check()
+
+
+def test_the_observer_initial_state_is_simulated_and_part_of_the_key(tmp_path):
+    from etobs import SaveAt, max_estimation_error, simulate
+    from etobs.experiments import run_sweep
+    from etobs.experiments.store import task_key
+
+    spec = parse_spec(_with_z0([50.0]))
+    res = run_sweep(spec, tmp_path / "z", executor="serial", progress=False)
+    plain = parse_spec(raw_spec(initial_states={"low": [-1.0], "high": [1.0], "runs": 2, "seed": 7}))
+    assert task_key(spec, 0) != task_key(plain, 0)  # never mixed with runs from z0 = 0
+    x0, grid, window = spec.initial_states.draw(), spec.metrics.grid(), spec.metrics.error_window
+
+    def error(z0):
+        sim = simulate(spec.problem(0), x0, spec.t_end, z0=z0, options=spec.options, save=SaveAt(grid=grid))
+        return max_estimation_error(sim, window)
+
+    first = sorted(
+        (r for r in res.runs if r["row"] == 0 and r["scenario"] == "coarse"), key=lambda r: r["run"]
+    )
+    assert [r["error"] for r in first] == pytest.approx(error([50.0]).tolist(), rel=1e-6)
+    assert [r["error"] for r in first] != pytest.approx(error([0.0]).tolist(), rel=1e-2)  # z0 matters here

@@ -97,6 +97,20 @@ def test_factory_errors_name_the_problem(tmp_path):
         bad.problem(0)
 
 
+def test_a_value_the_model_refuses_is_refused_before_any_run_naming_its_key(tmp_path):
+    # before: each chunk of row 1 failed in the workers, and row 0 ran (compare refused it up front)
+    bad = parse_spec(raw_spec(rows=[{"sigma": 0.0}, {"sigma": -0.1}]))
+    with pytest.raises(
+        SpecError, match=r"^`rows\[1\].sigma` \(row 1, scenario 'coarse'\): `sigma` must be >= 0; got -0.1$"
+    ):
+        run_sweep(bad, tmp_path / "out", executor="serial", progress=False)
+    assert not (tmp_path / "out").exists()  # nothing run, nothing written
+    parse_spec(raw_spec(rows=[{"sigma": 0.0}])).check()  # sigma = 0 (the static rule) is accepted
+    refused = parse_spec(raw_spec(rows=[{"k": 1.0}, {"k": 2.0, "refuse": True}]))
+    with pytest.raises(SpecError, match=r"failed on the arguments of row 1, scenario 'coarse': ValueError"):
+        refused.check()
+
+
 def test_a_killed_worker_is_replaced_and_nothing_is_lost(tmp_path):
     marker = tmp_path / "died"
     spec = parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"die_marker": str(marker)}}))
@@ -209,22 +223,10 @@ def test_stale_errors_are_cleared_when_the_runs_succeed_in_another_chunking(tmp_
 
     store = ResultStore(tmp_path)
     key = task_key(failing, 0)
-    ok_records = run_sweep(
-        parse_spec(raw_spec(rows=[{"k": 1.0}])), tmp_path / "ok", executor="serial", progress=False
-    ).runs
-    recs = [
-        {
-            "run": r["run"],
-            "status": r["status"],
-            "transmissions": [r["transmissions"]],
-            "error": r["error"],
-            "min_inter_event_time": [None],
-            "x0": [0.0],
-            "steps": 1,
-        }
-        for r in ok_records
-        if r["scenario"] == "coarse"
-    ]
+    ok = parse_spec(raw_spec(rows=[{"k": 1.0}]))
+    run_sweep(ok, tmp_path / "ok", executor="serial", progress=False)
+    coarse = ResultStore(tmp_path / "ok").records(task_key(ok, 0), 5)  # whole records, as run_task writes
+    recs = [coarse[r] for r in range(5)]
     store.write(key, tuple(range(5)), recs)  # one chunk of 5 covering the 3 failed chunks of 2
     again = run_sweep(failing, tmp_path, executor="serial", chunk=5, progress=False)
     # 'fine' still fails: one standing failure (the chunk of 5 supersedes the three older
@@ -277,11 +279,12 @@ def test_bad_chunk_and_numpy_parameters(tmp_path):
 
 def test_dimension_mismatch_is_named(tmp_path):
     spec = parse_spec(raw_spec(initial_states={"low": [0.0, 0.0], "high": [1.0, 1.0], "runs": 2, "seed": 1}))
-    res = run_sweep(spec, tmp_path, executor="serial", progress=False)
-    assert (
-        "`initial_states.low` and `.high` have 2 entries but the plant has n_x = 1"
-        in res.failures[0]["error"]
-    )
+    # refused before any run (it failed every chunk in the workers)
+    with pytest.raises(
+        SpecError, match=r"`initial_states.low` and `.high` have 2 entries but the plant has n_x = 1"
+    ):
+        run_sweep(spec, tmp_path / "out", executor="serial", progress=False)
+    assert not (tmp_path / "out").exists()
 
 
 def test_keys_ignore_how_numbers_are_written(tmp_path):
@@ -376,7 +379,7 @@ def test_network_problems_sweep_with_the_same_numbers_whatever_the_chunking(tmp_
         simulate(spec.problem(0), [[0.5], [0.2]], 1.0, run_ids=[0])
 
 
-def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
+def test_a_string_for_a_switch_is_refused_before_any_run_naming_the_key(tmp_path):
     raw = {
         "name": "switch",
         "system": {"factory": "robot_arm"},
@@ -384,9 +387,11 @@ def test_a_string_for_a_switch_fails_its_chunk_naming_the_argument(tmp_path):
         "initial_states": {"low": [0.0] * 4, "high": [1.0] * 4, "runs": 1, "seed": 1},
         "horizon": {"t_end": 0.1},
     }
-    res = run_sweep(parse_spec(raw), tmp_path, executor="serial", progress=False)
-    assert not res.complete and res.runs == []
-    assert "`noise` must be true or false; got 'false' (str)" in res.failures[0]["error"]
+    # refused before any run, naming the spec key (it failed the chunk in the workers)
+    with pytest.raises(
+        SpecError, match=r"^`scenarios\[0\].noise` .*: `noise` must be true or false; got 'false' \(str\)"
+    ):
+        run_sweep(parse_spec(raw), tmp_path / "out", executor="serial", progress=False)
 
 
 def _chunk_files(out):

@@ -49,12 +49,25 @@ RECORD_FORMAT = 3
 
 @dataclass(frozen=True)
 class InitialStates:
-    """Plant initial states drawn uniformly in the box ``[low, high]`` with ``seed``."""
+    """Plant initial states drawn uniformly in the box ``[low, high]`` with ``seed``.
+
+    ``z0`` is the observer's initial state of every run (``None``: zero, as in
+    :func:`~etobs.estimation.simulate`).
+    """
 
     low: tuple[float, ...]
     high: tuple[float, ...]
     runs: int
     seed: int
+    z0: tuple[float, ...] | None = None
+
+    def check_z0(self, n_z: int) -> None:
+        """Fail, naming ``initial_states.z0``, unless it has one entry per observer state."""
+        if self.z0 is not None and len(self.z0) != n_z:
+            raise SpecError(
+                f"`initial_states.z0` has {len(self.z0)} entries but the observer has n_z = {n_z}; "
+                f"expected {n_z} numbers"
+            )
 
     def draw(self, count: int | None = None) -> np.ndarray:
         """The first ``count`` (default ``runs``) initial states, shape ``(count, n_x)``.
@@ -173,7 +186,9 @@ class Experiment(abc.ABC):
                 "etobs": __version__,
                 "records": RECORD_FORMAT,
                 "factory": self.factory,
-                "initial_states": {"low": st.low, "high": st.high, "seed": st.seed},
+                # z0 only when given: the keys of specs without it are those of earlier versions
+                "initial_states": {"low": st.low, "high": st.high, "seed": st.seed}
+                | ({} if st.z0 is None else {"z0": st.z0}),
                 "t_end": self.t_end,
                 "metrics": [m.transmissions_window, m.error_window, m.error_grid_step],
                 "solver": self.options.__dict__,
@@ -280,7 +295,7 @@ def parse_initial_states(table: Any) -> InitialStates:
         "initial_states",
         table,
         {"low": box, "high": box, "runs": "an integer >= 1", "seed": "an integer >= 0"},
-        set(),
+        {"z0"},
     )
     for k in ("low", "high"):
         if not isinstance(ini[k], list) or not ini[k]:
@@ -293,11 +308,20 @@ def parse_initial_states(table: Any) -> InitialStates:
         )
     if any(h < lo for lo, h in zip(low, high, strict=True)):
         raise SpecError("`initial_states.high` must be >= `initial_states.low` entrywise")
+    z0 = ini.get("z0")
+    if z0 is not None:
+        if not isinstance(z0, list) or not z0:
+            raise SpecError(
+                "`initial_states.z0` must be a non-empty list of numbers (one per observer state); "
+                f"got {shown(z0)}"
+            )
+        z0 = tuple(float(_number(f"initial_states.z0[{i}]", v)) for i, v in enumerate(z0))
     return InitialStates(
         low,
         high,
         int(_number("initial_states.runs", ini["runs"], lower=1, integer=True)),
         int(_number("initial_states.seed", ini["seed"], lower=0, integer=True)),
+        z0,
     )
 
 

@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from etobs.errors import InputError
+from etobs.errors import EtobsError, InputError
 from etobs.experiments.common import Experiment
 from etobs.experiments.runner import Task, run_task
 
@@ -26,10 +26,20 @@ EXECUTORS = ("serial", "process", "dask")
 #: times before it is recorded as failed.
 MAX_POOL_RESTARTS = 3
 
+#: Seconds a Dask sweep waits while the scheduler has no worker (all were killed, say)
+#: before it ends with :class:`WorkersLost`: long enough for a nanny to restart one.
+WORKERLESS_WAIT = 60.0
+#: Seconds between two looks at the Dask futures and workers when nothing finished.
+_POLL = 0.1
+
 #: What every task of one experiment shares: the spec class and the raw spec.
 Job = tuple[type[Experiment], dict[str, Any]]
 Done = Callable[[Task, list[dict[str, Any]]], None]
 Failed = Callable[[Task, str], None]
+
+
+class WorkersLost(EtobsError):
+    """Every Dask worker was lost for :data:`WORKERLESS_WAIT` seconds: the remaining chunks were cancelled."""
 
 
 def execute(
@@ -174,14 +184,28 @@ def _dask(
     try:
         futures = [client.submit(run_task, *job, t, pure=False) for t in tasks]
         index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
-        for fut in dask_completed(futures):
-            task = index[fut.key]
-            if fut.status == "error":
-                on_error(task, "".join(traceback.format_exception(fut.exception())))
-            elif fut.status == "cancelled":
-                on_error(task, "the Dask future of this chunk was cancelled")
-            else:
-                on_done(task, fut.result())
+        pending = dask_completed(futures)
+        lost_since: float | None = None
+        while not pending.is_empty():
+            batch = pending.next_batch(block=False)
+            for fut in batch:
+                task = index[fut.key]
+                if fut.status == "error":
+                    on_error(task, "".join(traceback.format_exception(fut.exception())))
+                elif fut.status == "cancelled":
+                    on_error(task, "the Dask future of this chunk was cancelled")
+                else:
+                    on_done(task, fut.result())
+            if batch or client.nthreads():
+                lost_since = None
+            elif lost_since is None:
+                lost_since = time.monotonic()
+            elif time.monotonic() - lost_since > WORKERLESS_WAIT:
+                # the scheduler keeps the chunks until a worker joins: without one, forever
+                client.cancel(futures)
+                raise WorkersLost(f"every Dask worker was lost (none for {WORKERLESS_WAIT:g} s)")
+            if not batch:
+                time.sleep(_POLL)
     finally:
         if own:
             client.close()

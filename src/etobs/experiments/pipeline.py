@@ -21,7 +21,7 @@ from typing import Any
 from etobs._progress import progress_bar
 from etobs.errors import InputError
 from etobs.experiments.common import Experiment, normalize
-from etobs.experiments.executors import check_execution, execute
+from etobs.experiments.executors import WorkersLost, check_execution, execute
 from etobs.experiments.runner import Task
 from etobs.experiments.store import ResultStore, atomic_write, task_key
 
@@ -141,6 +141,12 @@ def run_groups(
             scheduler=scheduler,
             client=client,
         )
+    except WorkersLost as exc:  # one line: what ended it, and what is kept
+        kept = reused + computed
+        raise WorkersLost(
+            f"{exc}: {kept} of {total} runs are stored in {str(store.out)!r} and kept; rerun the same "
+            f"command to compute the other {total - kept}"
+        ) from None
     finally:
         bar.close()
     return computed, reused

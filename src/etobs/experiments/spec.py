@@ -10,6 +10,7 @@ are parsed by :func:`etobs.experiments.common.parse_common`.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,13 +106,18 @@ class SweepSpec(Experiment):
         """
         kwargs = self.kwargs(group)
         try:
-            return build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
+            problem = build(self.factory, kwargs, len(self.initial_states.low), self.where(group))
         except SpecError as exc:
             cause = exc.__cause__
-            named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
-            if named is None or named not in kwargs or isinstance(cause, SpecError):
+            if cause is None or isinstance(cause, SpecError):
                 raise
+            named = argument_named(str(cause)) if isinstance(cause, EtobsError) else None
+            if named is None or named not in kwargs:  # the factory's own name for it: list the keys it got
+                given = ", ".join(f"`{self.origin(group, k)}`" for k in kwargs) or "none"
+                raise SpecError(f"{exc} (the spec keys given to the factory: {given})") from cause
             raise SpecError(f"`{self.origin(group, named)}` ({self.where(group)}): {cause}") from cause
+        self.initial_states.check_z0(problem.observer.n_z)
+        return problem
 
     def origin(self, group: int, key: str) -> str:
         """The spec key that gives the factory's argument ``key`` in ``group``.
@@ -131,8 +137,20 @@ class SweepSpec(Experiment):
         return {**super().resolved(), "fixed": self.fixed, "rows": list(self.rows), "scenarios": scenarios}
 
     def check(self) -> None:
-        """Every row's and scenario's keys are arguments of the factory (it is not called)."""
+        """Build every group's problem, so a value the model refuses fails before any run.
+
+        As in a comparison (:meth:`CompareSpec.check`), the values are checked by the
+        classes that take them (a negative ``sigma`` by the rule), reached through the
+        factory; the error names the spec key (``rows[2].sigma``). Groups with the same
+        arguments are built once.
+        """
         check_arguments(self.factory, [(self.where(g), self.kwargs(g)) for g in range(self.n_groups)])
+        built = set()
+        for g in range(self.n_groups):
+            ident = json.dumps(self.group_identity(g), sort_keys=True, default=repr)
+            if ident not in built:
+                built.add(ident)
+                self.problem(g)
 
 
 def load_spec(path: str | Path) -> SweepSpec:
