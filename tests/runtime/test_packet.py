@@ -137,15 +137,16 @@ def _pkt(node, seq, t, value, *, initial=False, session=7.0, key=None):
 
 
 def test_an_authentic_huge_sequence_number_does_not_lock_the_node_out():
-    """seq 2^64 - 1 from the node's own key was accepted and every later packet was stale."""
+    """seq 2^64 - 1 from the node's own key was accepted and every later packet was stale;
+    then a jump of exactly 2^32 still was (the bound was on the wrong side)."""
     from etobs.runtime.service import MAX_SEQ_JUMP
 
     core = _core()
     assert core.receive(_pkt(0, 2**64 - 1, 0.1, 1.0), now=0.1) == "seq_jump"
-    assert core.receive(_pkt(0, 2 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "seq_jump"
-    assert core.receive(_pkt(0, 1 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "applied"  # the bound itself
+    assert core.receive(_pkt(0, 1 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "seq_jump"  # the bound itself
+    assert core.receive(_pkt(0, MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "applied"  # just below it
     assert core.receive(_pkt(1, 2, 0.1, 1.0), now=0.1) == "applied"
-    assert core.snapshot()["last_seq"] == [1 + MAX_SEQ_JUMP, 2]
+    assert core.snapshot()["last_seq"] == [MAX_SEQ_JUMP, 2]
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1.7e308, -1.0000001e12])

@@ -168,11 +168,10 @@ def run_serve(args: argparse.Namespace) -> int:
     core = ObserverCore(pb, keys, dt=dep.dt, marks=HighWaterMarks(dep.marks_file), max_value=dep.max_value)
     token = dep.token()
     given = None if args.epoch in (None, "-") else _epoch(args.epoch, dep)  # before anything opens
-    if args.trace is not None:
-        try:
-            open(args.trace, "w").close()  # written from the run's first tick on
-        except OSError as exc:
-            raise InputError(f"--trace {str(args.trace)!r} cannot be written: {exc.strerror or exc}") from exc
+    if args.trace is not None:  # written from the run's first tick on: refused now if it cannot be
+        from etobs.runtime.files import open_regular
+
+        open_regular(args.trace, "--trace", write=True).close()
 
     async def main() -> dict[str, Any]:
         srv = ObserverServer(

@@ -25,12 +25,16 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from etobs.errors import InputError
+from etobs.runtime.files import open_regular
 from etobs.runtime.packet import Packet, encode
 from etobs.runtime.sampled_rule import SampledRule
 
 #: How far ahead of the clock an epoch may lie: a start further away is a typing mistake,
 #: and the run would wait until then.
 MAX_EPOCH_LEAD = 3600.0
+#: Largest block of sequence numbers reserved at once: a restart skips at most a block, and
+#: the service refuses a jump of 2^32 (``service.MAX_SEQ_JUMP``) as a node gone wrong.
+MAX_BLOCK = 2**20
 
 
 def check_epoch(epoch: float, duration: float, time_scale: float, now: float, name: str = "`epoch`") -> float:
@@ -64,16 +68,29 @@ class SequenceStore:
     from it. Numbers are reserved ``block`` at a time, written atomically before use, so a
     crash skips at most a block and never reuses a number. ``path=None`` keeps them in
     memory (starting at 1). When the 64-bit numbers run out, :meth:`next` raises: the
-    node needs a new key (rotate the secret) and a new file.
+    node needs a new key (rotate the secret) and a new file. The file is opened without
+    blocking and refused unless it is a regular file (a FIFO hung the sensor in ``open()``).
+
+    Invariant (tested over restart points and block sizes): every number handed out is
+    below the bound on file when it is handed out, and a restart starts at that bound, so
+    numbers strictly increase across restarts and none is reused.
     """
 
     def __init__(self, path: str | os.PathLike[str] | None = None, block: int = 1024) -> None:
+        if isinstance(block, bool) or not isinstance(block, int) or not 1 <= block <= MAX_BLOCK:
+            # block = 0 wrote the number about to be handed out as the bound: a restart reused it
+            raise InputError(f"`block` must be an integer in 1..{MAX_BLOCK}; got {block!r}")
         self.path = None if path is None else Path(path)
         self.block = block
         self._next = 1
-        if self.path is not None and self.path.exists():
-            with open(self.path, "rb") as fh:  # 20 digits at most: a file without end is not read whole
-                text = fh.read(64).decode("utf-8", errors="replace").strip()
+        text = None
+        if self.path is not None:
+            try:
+                with open_regular(self.path, "sequence file") as fh:  # 20 digits at most: not read whole
+                    text = fh.read(64).decode("utf-8", errors="replace").strip()
+            except FileNotFoundError:
+                pass
+        if text is not None:
             if not (text.isascii() and text.isdigit()) or int(text) >= 2**64:
                 raise InputError(
                     f"sequence file {self.path} is damaged: {text[:40]!r}; remove it only if the key changes"
@@ -86,8 +103,8 @@ class SequenceStore:
         self._limit = min(self._next + self.block, 2**64 - 1)
         if self.path is not None:
             tmp = self.path.with_name(f".{self.path.name}.tmp")
-            with open(tmp, "w") as fh:
-                fh.write(str(self._limit))
+            with open_regular(tmp, "sequence file's temporary file", write=True, follow=False) as fh:
+                fh.write(str(self._limit).encode())
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, self.path)

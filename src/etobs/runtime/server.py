@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
+from etobs.runtime.files import open_regular
 from etobs.runtime.packet import MAX_BYTES
 from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
@@ -218,11 +219,13 @@ class ObserverServer:
         """
         assert self.epoch is not None, "start() first"
         check_epoch(self.epoch, t_end, self.time_scale, time.time())
-        fh = open(self.trace_path, "w") if self.trace_path is not None else None
+        fh = open_regular(self.trace_path, "the trace", write=True) if self.trace_path is not None else None
         give_up = self.epoch + t_end / self.time_scale + linger
         # the next trace line is at k * tick: from 0, or at most MAX_BACKFILL_LINES before now for
         # a service started long after its epoch (`serve --epoch 1` wrote every line since 1970 first)
         k = max(0, math.floor((self.now() - self.hold_back) / self.tick) - MAX_BACKFILL_LINES)
+        # an observer resumed from its checkpoint starts there: no lines before its time
+        k = max(k, math.ceil(self.core.t / self.tick - 1e-9))
         try:
             while True:
                 done = finished is None or finished() or time.time() > give_up
@@ -234,12 +237,12 @@ class ObserverServer:
                 while k * self.tick <= target:  # bounded: (target - last target) / tick lines
                     self.core.advance(min(k * self.tick, t_end))
                     if fh is not None:
-                        fh.write(to_json(self.core.snapshot()) + "\n")
+                        fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     k += 1
                 self.core.advance(target)
                 if target >= t_end:
                     if fh is not None and (k - 1) * self.tick < t_end:  # the end is always a line
-                        fh.write(to_json(self.core.snapshot()) + "\n")
+                        fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     break
                 await asyncio.sleep(self.tick / self.time_scale / 2)
             return self.core.snapshot()

@@ -14,7 +14,7 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
 * ``replayed`` if its sequence number was already accepted (a copy);
 * ``stale`` if it is older than the last one accepted (overtaken, or a replay older than
   the window of recent numbers or than a restart);
-* ``seq_jump`` if it is more than ``MAX_SEQ_JUMP`` above the last one accepted (a node
+* ``seq_jump`` if it is ``MAX_SEQ_JUMP`` or more above the last one accepted (a node
   never skips that many: accepting it would refuse the node's next packets as stale);
 * ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
   (a wrong clock or epoch; accepting it would stall the observer);
@@ -23,11 +23,26 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
   when it was measured); one whose time the observer has passed is applied at the next
   :meth:`ObserverCore.advance` and counted in ``late``.
 
+The newest sequence number of a node wins over time stamps: a packet stamped earlier than
+one of its node accepted before (the sensor's clock went back) is applied at that later
+time, after it, and counted in the node's ``clock_back``; an older measurement never
+overrides a newer one.
+
+``status`` is ``nonfinite`` (below), else ``refusing`` when some node's last
+``REFUSED_IN_A_ROW`` authentic packets or more were all refused as ``stale`` or
+``wrong_session`` (its sequence file was reset, or it runs another epoch: the snapshot's
+``refused`` names it), else ``waiting`` while some node has not been heard in this
+session (``waiting`` lists them), else ``ok``.
+
 Before queued packets are applied, the high-water marks are written to their file
 (:class:`~etobs.runtime.marks.HighWaterMarks`), so a packet that acted on the estimate is
-refused after any restart. Every rejection is counted by kind; nothing raises. If the
-observer's state stops being finite (an unstable observer, a too-large ``dt``), it stays
-at its last finite value and ``status`` says ``nonfinite``. The asyncio transports
+refused after any restart. The observer state (``t``, ``z``, ``ybar``, the packets
+accepted but not yet applied) is written with them, and at least every
+``CHECKPOINT_EVERY`` of service time: a service restarted on the same session resumes
+from it at once (integrating from the checkpoint's time reproduces the run it left).
+Every rejection is counted by kind; nothing raises. If the observer's state stops being
+finite (an unstable observer, a too-large ``dt``), it stays at its last finite value and
+``status`` says ``nonfinite``. The asyncio transports
 (:mod:`etobs.runtime.server`) feed it.
 """
 
@@ -65,6 +80,12 @@ VERDICTS = (
 MAX_SEQ_JUMP = 2**32
 #: Sample times beyond this many seconds (31,700 years) are no clock's.
 MAX_TIME = 1e12
+#: Authentic packets of a node refused in a row as ``stale`` or ``wrong_session`` before the
+#: status names it: one or two are a replay or a packet overtaken in the network.
+REFUSED_IN_A_ROW = 3
+#: Service time between two checkpoints of the observer state when no packet is accepted
+#: (a restart integrates at most this much again).
+CHECKPOINT_EVERY = 1.0
 
 
 @dataclass
@@ -77,6 +98,11 @@ class NodeState:
     recent: deque[int] = field(default_factory=lambda: deque(maxlen=256))
     transmissions: int = 0
     gaps: int = 0
+    heard: bool = False  # a packet accepted in this session
+    last_t: float = -math.inf  # the latest time a packet of this node is applied at
+    clock_back: int = 0  # packets stamped before one accepted earlier (applied after it)
+    refused: str = ""  # the verdict of the authentic packets refused in a row
+    refused_in_a_row: int = 0
 
 
 class ObserverCore:
@@ -141,17 +167,77 @@ class ObserverCore:
             for i, nd in enumerate(problem.nodes)
         }
         self.marks = marks
+        self._checkpoint: dict[str, Any] | None = None  # the observer state on file, if any
         if marks is not None:
-            for i, seq in marks.load({i: nd.key_id for i, nd in self.nodes.items()}).items():
+            stored = marks.load({i: nd.key_id for i, nd in self.nodes.items()})
+            for i, seq in stored.items():
                 if i in self.nodes:
                     self.nodes[i].last_seq = seq
+            self._checkpoint = marks.observer
         self._dirty = False  # marks accepted but not yet written
+        self._saved_t = self.t  # service time of the last checkpoint
         self.counts = dict.fromkeys(VERDICTS, 0)
-        self.max_lead, self.max_value, self.session = float(max_lead), float(max_value), float(session)
-        self._queue: list[tuple[float, int, int, Packet]] = []  # (t, node, seq, packet)
+        self.max_lead, self.max_value = float(max_lead), float(max_value)
+        self._queue: list[tuple[float, int, int, Packet]] = []  # (time applied, node, seq, packet)
         self.late = 0
         self.max_lateness = 0.0
-        self.status = "ok"
+        self.nonfinite = False
+        self.resumed = False  # whether the observer state was restored from the checkpoint
+        self.session = float(session)
+
+    @property
+    def session(self) -> float:
+        """The session (epoch) packets must carry; setting it restores a checkpoint of that session."""
+        return self._session
+
+    @session.setter
+    def session(self, value: float) -> None:
+        self._session = float(value)
+        cp = self._checkpoint
+        if cp is not None and cp["session"] == self._session and not self.resumed:
+            self._restore(cp)
+
+    def _restore(self, cp: dict[str, Any]) -> None:
+        """The observer state of checkpoint ``cp`` (same session), before any packet of this run."""
+        n_z, n_y = self.z.size, self.ybar.size
+        if len(cp["z"]) != n_z or len(cp["ybar"]) != n_y or any(i not in self.nodes for i in cp["heard"]):
+            raise InputError(
+                f"the observer state in {str(self.marks.path) if self.marks else '?'!r} has "
+                f"{len(cp['z'])} states and {len(cp['ybar'])} outputs; this problem's observer has {n_z} "
+                f"and {n_y}: it is another deployment's; start a new epoch (omit --epoch)"
+            )
+        self.t, self._saved_t = cp["t"], cp["t"]
+        self.z = np.array(cp["z"], dtype=float)
+        self.ybar = np.array([np.nan if v is None else v for v in cp["ybar"]], dtype=float)
+        self.nonfinite = cp["nonfinite"]
+        for i in cp["heard"]:
+            self.nodes[i].heard = True
+        for t_apply, node, seq, t, values, initial in cp["queue"]:
+            p = Packet(node, seq, t, tuple(values), initial, self._session)
+            heapq.heappush(self._queue, (t_apply, node, seq, p))
+            self.nodes[node].last_t = max(self.nodes[node].last_t, t_apply)
+        self.resumed = True
+
+    @property
+    def status(self) -> str:
+        """``nonfinite``, ``refusing``, ``waiting`` or ``ok`` (see the module docstring)."""
+        if self.nonfinite:
+            return "nonfinite"
+        if self.refused():
+            return "refusing"
+        return "waiting" if self.waiting() else "ok"
+
+    def waiting(self) -> list[int]:
+        """The nodes not heard in this session."""
+        return [i for i in sorted(self.nodes) if not self.nodes[i].heard]
+
+    def refused(self) -> list[dict[str, Any]]:
+        """The nodes whose last ``REFUSED_IN_A_ROW`` or more authentic packets were all refused."""
+        return [
+            {"node": i, "verdict": nd.refused, "in_a_row": nd.refused_in_a_row}
+            for i, nd in sorted(self.nodes.items())
+            if nd.refused_in_a_row >= REFUSED_IN_A_ROW
+        ]
 
     @property
     def ready(self) -> bool:
@@ -178,8 +264,9 @@ class ObserverCore:
         """
         if not math.isfinite(t):
             raise InputError(f"`t` must be a finite time; got {t!r}")
-        if self._dirty and self.marks is not None:
-            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()})
+        if self.marks is not None and (self._dirty or self.t - self._saved_t >= CHECKPOINT_EVERY):
+            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()}, self.checkpoint())
+            self._saved_t = self.t
         self._dirty = False
         while self._queue and self._queue[0][0] <= t:
             tk, _, _, p = heapq.heappop(self._queue)
@@ -193,7 +280,7 @@ class ObserverCore:
     def _integrate(self, t: float) -> None:
         if t <= self.t:
             return
-        if not self.ready or self.status != "ok":  # nothing (sound) to run on: the state waits
+        if not self.ready or self.nonfinite:  # nothing (sound) to run on: the state waits
             self.t = t
             return
         n = max(1, math.ceil((t - self.t) / self.dt - 1e-9))
@@ -208,7 +295,7 @@ class ObserverCore:
                 k4 = self._f(s + h, z + h * k3)
                 step = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
                 if not np.all(np.isfinite(step)) or not np.all(np.isfinite(self._psi(step))):
-                    self.status = "nonfinite"  # keep the last finite state; say so
+                    self.nonfinite = True  # keep the last finite state; say so
                     self.z, self.t = z, t
                     return
                 z = step
@@ -230,7 +317,7 @@ class ObserverCore:
         if node is None:  # a key exists but the problem has no such node
             return self._count("forged")
         if p.session != self.session:
-            return self._count("wrong_session")
+            return self._refuse(node, "wrong_session")
         if len(p.values) != node.outputs.size:
             return self._count("wrong_size")
         if not all(math.isfinite(v) and abs(v) <= self.max_value for v in p.values) or not (
@@ -240,8 +327,8 @@ class ObserverCore:
         if p.seq in node.recent:
             return self._count("replayed")
         if p.seq <= node.last_seq:
-            return self._count("stale")
-        if p.seq - node.last_seq > MAX_SEQ_JUMP:
+            return self._refuse(node, "stale")
+        if p.seq - node.last_seq >= MAX_SEQ_JUMP:  # a jump of MAX_SEQ_JUMP itself is refused
             return self._count("seq_jump")
         if now is not None and p.t > now + self.max_lead:
             return self._count("future")
@@ -249,11 +336,21 @@ class ObserverCore:
             node.gaps += p.seq - node.last_seq - 1
         node.last_seq = p.seq
         node.recent.append(p.seq)
+        node.heard, node.refused, node.refused_in_a_row = True, "", 0
         self._dirty = True
         if not p.initial:
             node.transmissions += 1
-        heapq.heappush(self._queue, (p.t, p.node, p.seq, p))
+        if p.t < node.last_t:  # the sensor's clock went back: the newer number still wins
+            node.clock_back += 1
+        node.last_t = max(node.last_t, p.t)
+        heapq.heappush(self._queue, (node.last_t, p.node, p.seq, p))
         return self._count("initial" if p.initial else "applied")
+
+    def _refuse(self, node: NodeState, verdict: str) -> str:
+        """Count an authentic packet refused as ``stale`` or ``wrong_session`` against its node."""
+        node.refused_in_a_row = node.refused_in_a_row + 1 if node.refused == verdict else 1
+        node.refused = verdict
+        return self._count(verdict)
 
     def _hold(self, p: Packet) -> None:
         self.ybar[self.nodes[p.node].outputs] = p.values  # eq. (5): ybar_i+ = y_i(t_k)
@@ -268,13 +365,29 @@ class ObserverCore:
         return {
             "t": self.t,
             "status": self.status,
+            "waiting": self.waiting(),
+            "refused": self.refused(),
             "xhat": [_finite(v) for v in self.xhat()],
             "ybar": [_finite(v) for v in self.ybar],
             "transmissions": [nd.transmissions for nd in nodes],
             "last_seq": [nd.last_seq for nd in nodes],
             "gaps": [nd.gaps for nd in nodes],
+            "clock_back": [nd.clock_back for nd in nodes],
             "counts": dict(self.counts),
             "late": self.late,
+            "resumed": self.resumed,
+        }
+
+    def checkpoint(self) -> dict[str, Any]:
+        """The observer state written with the marks: what a restart on this session resumes from."""
+        return {
+            "session": self.session,
+            "t": self.t,
+            "z": [float(v) for v in self.z],
+            "ybar": [_finite(v) for v in self.ybar],
+            "nonfinite": self.nonfinite,
+            "heard": [i for i in sorted(self.nodes) if self.nodes[i].heard],
+            "queue": [[ta, i, s, p.t, list(p.values), p.initial] for ta, i, s, p in sorted(self._queue)],
         }
 
 

@@ -1,0 +1,281 @@
+"""The service's state (issue 23): a status that says what it waits for and whom it refuses,
+the observer checkpointed with the marks and resumed after a restart, the newest sequence
+number winning over time stamps, the sequence-jump bound on both sides, files that are not
+regular refused without blocking, and sequence numbers never reused across restarts."""
+
+import itertools
+import json
+import math
+import os
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from etobs.errors import InputError
+from etobs.examples import robot_arm
+from etobs.runtime.marks import HighWaterMarks
+from etobs.runtime.packet import Packet, encode, node_keys
+from etobs.runtime.sampled_rule import SampledRule
+from etobs.runtime.sensor import SensorNode, SequenceStore
+from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, ObserverCore
+
+KEYS = node_keys(b"deployment secret", [0, 1])
+SESSION = 7.0
+
+
+def _pkt(node, seq, t, value, *, initial=False, session=SESSION):
+    return encode(Packet(node, seq, t, (value,), initial, session), KEYS[node])
+
+
+def _core(**kw):
+    return ObserverCore(robot_arm(), KEYS, session=SESSION, **kw)
+
+
+def test_the_status_waits_until_every_node_is_heard():
+    """It said "ok" having received nothing."""
+    core = _core()
+    snap = core.snapshot()
+    assert snap["status"] == "waiting" and snap["waiting"] == [0, 1] and snap["xhat"] is not None
+    assert core.receive(_pkt(0, 1, 0.0, 0.0, initial=True), now=0.0) == "initial"
+    assert core.snapshot()["status"] == "waiting" and core.snapshot()["waiting"] == [1]
+    assert core.receive(_pkt(1, 1, 0.0, 0.0, initial=True), now=0.0) == "initial"
+    snap = core.snapshot()
+    assert snap["status"] == "ok" and snap["waiting"] == [] and snap["refused"] == []
+
+
+@pytest.mark.parametrize("verdict", ["stale", "wrong_session"])
+def test_a_node_whose_packets_are_refused_in_a_row_is_named(verdict):
+    """After the sensors' sequence files were deleted, their packets were refused as stale
+    while the status said ok. The bound on both sides: REFUSED_IN_A_ROW - 1 refusals are a
+    replay or an overtaken packet (not named), REFUSED_IN_A_ROW name the node."""
+    core = _core()
+    for i in range(2):
+        assert core.receive(_pkt(i, 5000, 0.0, 0.0, initial=True), now=0.0) == "initial"
+
+    def refused(k):  # a node restarted without its sequence file (numbers from 1), or on another epoch
+        seq = k + 1 if verdict == "stale" else 6000 + k
+        return _pkt(1, seq, 0.1, 1.0, session=SESSION if verdict == "stale" else 8.0)
+
+    for k in range(REFUSED_IN_A_ROW - 1):
+        assert core.receive(refused(k), now=0.1) == verdict
+    assert core.snapshot()["status"] == "ok" and core.snapshot()["refused"] == []
+    assert core.receive(refused(REFUSED_IN_A_ROW), now=0.1) == verdict
+    snap = core.snapshot()
+    assert snap["status"] == "refusing"
+    assert snap["refused"] == [{"node": 1, "verdict": verdict, "in_a_row": REFUSED_IN_A_ROW}]
+    assert core.receive(_pkt(1, 5001, 0.2, 1.0), now=0.2) == "applied"  # a packet in: named no more
+    assert core.snapshot()["status"] == "ok" and core.snapshot()["refused"] == []
+
+
+def test_a_sensor_whose_sequence_file_was_deleted_is_named(tmp_path):
+    """The case of the trial: a real node whose file is gone starts again at 1 and is stale."""
+    pb = robot_arm()
+    core = ObserverCore(pb, KEYS, marks=HighWaterMarks(tmp_path / "s.state"))
+    inbox = []
+    spec = {"kind": "periodic", "period": 0.01}
+    for i in range(2):
+        core.receive(encode(Packet(i, 2000, 0.0, (0.0,), True), KEYS[i]))
+    core.advance(0.0)
+    node = SensorNode(1, KEYS[1], SampledRule(spec, 0.01), inbox.append, SequenceStore(tmp_path / "n1.seq"))
+    for k in range(REFUSED_IN_A_ROW + 1):
+        node.sample(0.01 * k, [1.0 + k])
+    assert [core.receive(d) for d in inbox][:2] == ["stale", "stale"]
+    assert core.snapshot()["status"] == "refusing" and core.snapshot()["refused"][0]["node"] == 1
+
+
+def test_the_newest_sequence_number_wins_over_time_stamps():
+    """A sensor clock going back made an older measurement override the newest one: packets
+    were applied in time-stamp order. Now the newer number is applied after the older one."""
+    core = _core()
+    for i in range(2):
+        core.receive(_pkt(i, 1, 0.0, 0.0, initial=True), now=0.0)
+    assert core.receive(_pkt(0, 2, 0.50, 5.0), now=0.5) == "applied"
+    assert core.receive(_pkt(0, 3, 0.45, 6.0), now=0.5) == "applied"  # newer, stamped earlier
+    assert core.receive(_pkt(1, 2, 0.47, 7.0), now=0.5) == "applied"  # another node: its own time
+    core.advance(0.48)
+    assert core.ybar.tolist() == [0.0, 7.0]  # node 0's newest waits for its older one
+    core.advance(0.6)
+    assert core.ybar.tolist() == [6.0, 7.0] and core.snapshot()["clock_back"] == [1, 0]
+    # once the older one was applied, a newer one stamped before it acts at once (late)
+    assert core.receive(_pkt(0, 4, 0.1, 8.0), now=0.6) == "applied"
+    core.advance(0.6)
+    assert core.ybar[0] == 8.0 and core.late == 1 and core.snapshot()["clock_back"] == [2, 0]
+
+
+@pytest.mark.parametrize(("jump", "verdict"), [(MAX_SEQ_JUMP - 1, "applied"), (MAX_SEQ_JUMP, "seq_jump")])
+def test_the_sequence_jump_bound_on_both_sides_and_across_a_restart(tmp_path, jump, verdict):
+    """One authentic packet with seq = last + 2^32 was accepted, its mark written, and the
+    node's next packets stale, across restarts too."""
+    marks = HighWaterMarks(tmp_path / "s.state")
+    core = _core(marks=marks)
+    for i in range(2):
+        core.receive(_pkt(i, 10, 0.0, 0.0, initial=True), now=0.0)
+    assert core.receive(_pkt(0, 10 + jump, 0.1, 1.0), now=0.1) == verdict
+    core.advance(0.2)  # the marks are written
+    restarted = _core(marks=marks)
+    expected = 10 + jump if verdict == "applied" else 10
+    assert restarted.snapshot()["last_seq"] == [expected, 10]
+    if verdict == "seq_jump":  # the node was not locked out: its next packet is applied
+        assert restarted.receive(_pkt(0, 11, 0.3, 2.0), now=0.3) == "applied"
+
+
+def _packets(pb, t_end, period):
+    """Packets of both nodes of the arm on smooth made-up outputs: [(t_k, [datagrams])]."""
+    inbox, out = [], []
+    nodes = [
+        SensorNode(i, KEYS[i], SampledRule(nd.rule.sensor_spec(), period), inbox.append, session=SESSION)
+        for i, nd in enumerate(pb.nodes)
+    ]
+    for k in range(round(t_end / period) + 1):
+        t = k * period
+        for i, node in enumerate(nodes):
+            node.sample(t, [3.0 * math.cos(1.3 * t + i) + 0.5 * t])
+        out.append((t, list(inbox)))
+        inbox.clear()
+    return out
+
+
+def _feed(core, packets, t_from=-1.0, t_to=math.inf):
+    xhat = {}
+    for t, data in packets:
+        if t_from < t <= t_to:
+            for d in data:
+                core.receive(d, now=t)
+            core.advance(t)
+            xhat[round(t, 9)] = core.xhat()
+    return xhat
+
+
+def test_a_restarted_service_resumes_its_observer_from_the_checkpoint(tmp_path):
+    """A service killed and restarted kept its marks but not its observer: no estimate until
+    every node had sent again (4.9 s in the trial). Now it resumes at once from the state
+    written with the marks, and goes on exactly as the run that was not interrupted."""
+    pb = robot_arm()
+    packets = _packets(pb, 2.0, 0.01)
+    undisturbed = _feed(_core(), packets)
+    killed = _core(marks=HighWaterMarks(tmp_path / "s.state"))
+    _feed(killed, packets, t_to=1.0)  # killed after its advance to t = 1.0: nothing more is written
+    saved = json.loads((tmp_path / "s.state").read_text())
+    assert saved["version"] == 2 and saved["observer"]["session"] == SESSION
+    restarted = _core(marks=HighWaterMarks(tmp_path / "s.state"))
+    snap = restarted.snapshot()
+    assert restarted.resumed and snap["status"] == "ok" and None not in snap["xhat"]
+    assert saved["observer"]["t"] <= restarted.t <= 1.0
+    after = _feed(restarted, packets, t_from=1.0)
+    assert restarted.counts["stale"] == restarted.counts["replayed"] == 0
+    gap = max(np.max(np.abs(after[t] - undisturbed[t])) for t in after)
+    assert gap < 1e-9 * max(np.max(np.abs(undisturbed[t])) for t in after)
+    # another session (a new epoch) starts afresh: the state belongs to the run it was written in
+    fresh = ObserverCore(pb, KEYS, session=SESSION + 1, marks=HighWaterMarks(tmp_path / "s.state"))
+    assert not fresh.resumed and fresh.t == 0.0 and fresh.snapshot()["status"] == "waiting"
+
+
+def test_a_checkpoint_of_another_problem_is_refused(tmp_path):
+    from tests.estimation import linear
+
+    marks = HighWaterMarks(tmp_path / "s.state")
+    core = ObserverCore(linear.factory(), KEYS, session=SESSION, marks=marks)
+    core.receive(_pkt(0, 1, 0.0, 0.0, initial=True), now=0.0)
+    core.advance(0.1)
+    with pytest.raises(
+        InputError, match=r"observer state in .*s.state' has 2 states and 1 outputs; .* has 4"
+    ):
+        _core(marks=marks)
+    saved = json.loads((tmp_path / "s.state").read_text())
+    saved["observer"]["z"] = ["x", 1.0]
+    (tmp_path / "s.state").write_text(json.dumps(saved))
+    with pytest.raises(
+        InputError, match=r"high-water marks .* are damaged \(the observer state is not one\)"
+    ):
+        _core(marks=marks)
+
+
+def _in_thread(fn, fifo):
+    """``fn()`` in a thread; a call that blocks on the FIFO is released and reported."""
+    box = {}
+
+    def call():
+        try:
+            box["value"] = fn()
+        except Exception as exc:  # the test looks at it
+            box["error"] = exc
+
+    thread = threading.Thread(target=call, daemon=True)
+    thread.start()
+    thread.join(30)
+    if thread.is_alive():  # release the open() that blocks, then fail
+        os.close(os.open(fifo, os.O_RDWR | os.O_NONBLOCK))
+        thread.join(30)
+        pytest.fail(f"{fn} blocked on the FIFO {fifo}")
+    return box
+
+
+@pytest.mark.parametrize("which", ["secret", "token", "state", "sequence", "trace"])
+def test_a_file_that_is_a_fifo_is_refused_without_blocking(tmp_path, which):
+    """A secret, state or token file that was a FIFO hung `etobs serve` in open(); a
+    sequence file hung the sensor."""
+    import tomllib
+    from dataclasses import replace
+
+    from etobs.runtime.deployment import parse_deployment
+    from etobs.runtime.files import open_regular
+
+    fifo = tmp_path / f"{which}.fifo"
+    os.mkfifo(fifo)
+    text = '[system]\nfactory = "robot_arm"\n[runtime]\nperiod = 0.01\nduration = 1.0\nhttp_port = 0\n'
+    dep = parse_deployment(tomllib.loads(text), tmp_path)
+    calls = {
+        "secret": lambda: replace(dep, secret_file=fifo).secret(create=True),
+        "token": lambda: replace(dep, http_token_file=fifo).token(),
+        "state": lambda: HighWaterMarks(fifo).load({0: "k"}),
+        "sequence": lambda: SequenceStore(fifo),
+        "trace": lambda: open_regular(fifo, "--trace", write=True),
+    }
+    box = _in_thread(calls[which], fifo)
+    assert isinstance(box.get("error"), InputError), box
+    message = str(box["error"])
+    assert len(message.splitlines()) == 1 and str(fifo) in message, message
+    assert "is a FIFO, not a regular file" in message or "cannot be opened: No such device" in message
+
+
+def test_a_folder_or_a_device_is_refused_naming_it(tmp_path):
+    from etobs.runtime.files import open_regular
+
+    with pytest.raises(InputError, match=r"`runtime.secret_file` '.*' is a folder, not a regular file"):
+        open_regular(tmp_path, "`runtime.secret_file`")
+    with pytest.raises(InputError, match=r"--trace '/dev/null' is a character device, not a regular file"):
+        open_regular("/dev/null", "--trace", write=True)
+    link = tmp_path / "link"
+    link.symlink_to(tmp_path / "target")
+    (tmp_path / "target").write_text("x")
+    with pytest.raises(InputError, match=r"the high-water marks '.*link' cannot be opened"):
+        open_regular(link, "the high-water marks", follow=False)
+    with open_regular(link, "`runtime.secret_file`") as fh:  # a secret may be a link (a mounted one)
+        assert fh.read() == b"x"
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    block=st.integers(1, 9),
+    takes=st.lists(st.integers(0, 25), min_size=1, max_size=8),
+)
+def test_sequence_numbers_strictly_increase_across_restarts(tmp_path_factory, block, takes):
+    """A restarted SequenceStore must never reuse a number, at a block boundary or anywhere:
+    the node takes ``takes[r]`` numbers in run ``r`` and is killed (no clean shutdown)."""
+    path = tmp_path_factory.mktemp("seq") / "node.seq"
+    got = []
+    for n in takes:
+        store = SequenceStore(path, block=block)
+        got += [store.next() for _ in range(n)]
+    assert all(b > a for a, b in itertools.pairwise(got)), got
+    assert got == [] or got[0] >= 1
+
+
+@pytest.mark.parametrize("block", [0, -1, 1.5, True, 2**20 + 1])
+def test_a_block_that_would_reuse_numbers_is_refused(block):
+    """``block = 0`` wrote the number about to be handed out as the bound: a restart reused it."""
+    with pytest.raises(InputError, match=r"`block` must be an integer in 1..1048576; got"):
+        SequenceStore(None, block=block)
