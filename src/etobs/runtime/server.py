@@ -11,7 +11,10 @@ time (see :class:`~etobs.runtime.service.ObserverCore`). Endpoints:
   UDP socket, so a service that takes packets from remote sensors does not also show
   its estimate to them): the current estimate and counters as JSON. With a ``token`` the
   request must carry ``Authorization: Bearer <token>`` (compared in constant time); a
-  non-loopback ``http_host`` requires one.
+  non-loopback ``http_host`` requires one. A request must be read whole within
+  ``read_timeout``; idle connections cannot deny the endpoint: beyond
+  ``HTTP_MAX_CLIENTS`` (or ``HTTP_MAX_PER_ADDRESS`` from one address) connections still
+  being read, a new one evicts the oldest of them.
 
 The trace is JSON lines, one object per ``tick`` of service time on the grid
 ``t = 0, tick, 2 tick, ...`` and one at the end (``t``, ``status``, ``xhat``, ``ybar``,
@@ -41,10 +44,15 @@ from etobs.runtime.packet import MAX_BYTES
 from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
 
-#: Idle or slow HTTP clients are dropped after this many seconds, and at most this many
-#: are served at once: a client cannot hold the service's sockets.
+#: Read deadline: a client whose request is not read whole within this many seconds is
+#: dropped (the default of ``read_timeout``).
 HTTP_TIMEOUT = 2.0
-HTTP_MAX_CLIENTS = 32
+#: Connections whose request is still being read, at most, in all and from one address. A
+#: new connection beyond either cap evicts the *oldest* such one (of that address), never
+#: itself: 32 idle connections, with the cap taken before the request was read, denied
+#: ``GET /estimate`` to everyone. 256 file descriptors stay well under the usual limit of 1024.
+HTTP_MAX_CLIENTS = 256
+HTTP_MAX_PER_ADDRESS = 64
 HTTP_MAX_HEADERS = 32
 #: Most observer steps per wall second (``time_scale / dt``). A step of the robot arm's
 #: observer takes about 70 us in Python, so this is several times more than a service
@@ -100,6 +108,8 @@ class ObserverServer:
         Where to write the trace.
     token : bytes, optional
         The bearer token ``GET /estimate`` requires (required on a non-loopback host).
+    read_timeout : float
+        Seconds a client has to send its whole request (and to take the answer).
 
     """
 
@@ -113,8 +123,9 @@ class ObserverServer:
         hold_back: float = 0.05,
         trace: str | Path | None = None,
         token: bytes | None = None,
+        read_timeout: float = HTTP_TIMEOUT,
     ) -> None:
-        for name, value in (("time_scale", time_scale), ("tick", tick)):
+        for name, value in (("time_scale", time_scale), ("tick", tick), ("read_timeout", read_timeout)):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
         if not (isinstance(hold_back, int | float) and math.isfinite(hold_back) and hold_back >= 0):
@@ -137,6 +148,9 @@ class ObserverServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._http: asyncio.Server | None = None
         self._clients: set[asyncio.Task[None]] = set()
+        self.read_timeout = float(read_timeout)
+        #: Connections whose request is being read, oldest first, with their peer's address.
+        self._reading: dict[asyncio.Task[None], str] = {}
         self.received = 0  # datagrams handed to the core
 
     @property
@@ -274,26 +288,41 @@ class ObserverServer:
             await asyncio.gather(*self._clients, return_exceptions=True)
             await self._http.wait_closed()
 
+    def _make_room(self, host: str) -> None:
+        """Evict the oldest connection still being read, if a cap would be passed by one more."""
+        same = [t for t, h in self._reading.items() if h == host]
+        if len(same) >= HTTP_MAX_PER_ADDRESS:
+            victim = same[0]
+        elif len(self._reading) >= HTTP_MAX_CLIENTS:
+            victim = next(iter(self._reading))
+        else:
+            return
+        del self._reading[victim]
+        victim.cancel()  # its handler closes the connection
+
     async def _serve_http(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
         assert task is not None
-        if len(self._clients) >= HTTP_MAX_CLIENTS:
-            writer.close()
-            return
+        peer = writer.get_extra_info("peername")
+        host = str(peer[0]) if peer else ""
+        self._make_room(host)
         self._clients.add(task)
+        self._reading[task] = host
         try:
-            status, body, extra = await asyncio.wait_for(self._answer(reader), timeout=HTTP_TIMEOUT)
+            status, body, extra = await asyncio.wait_for(self._answer(reader), timeout=self.read_timeout)
+            self._reading.pop(task, None)
             head = (
                 f"HTTP/1.0 {status}\r\nContent-Type: application/json\r\n{extra}"
                 f"Content-Length: {len(body)}\r\n\r\n"
             )
             writer.write(head.encode() + body)
-            await writer.drain()
-        # a client that is slow, disconnects, sends junk or too long a line; or the service
-        # closing (CancelledError): the connection ends without a traceback
+            await asyncio.wait_for(writer.drain(), timeout=self.read_timeout)  # a client that reads nothing
+        # a client that is slow, disconnects, sends junk or too long a line; evicted for a newer
+        # one, or the service closing (CancelledError): the connection ends without a traceback
         except (TimeoutError, ConnectionError, UnicodeDecodeError, ValueError, asyncio.CancelledError):
             pass
         finally:
+            self._reading.pop(task, None)
             self._clients.discard(task)
             writer.close()
 
