@@ -26,12 +26,16 @@ from pathlib import Path
 
 from etobs.errors import InputError
 from etobs.runtime.files import open_regular
-from etobs.runtime.packet import Packet, encode
+from etobs.runtime.packet import Packet, PacketError, decode, encode
 from etobs.runtime.sampled_rule import SampledRule
 
 #: How far ahead of the clock an epoch may lie: a start further away is a typing mistake,
 #: and the run would wait until then.
 MAX_EPOCH_LEAD = 3600.0
+#: Seconds between two hellos of a sensor waiting for the service's answer (a datagram
+#: may be lost), and how long it waits in all by default.
+HELLO_RETRY = 0.5
+HANDSHAKE_TIMEOUT = 3600.0
 #: Largest block of sequence numbers reserved at once: a restart skips at most a block, and
 #: the service refuses a jump of 2^32 (``service.MAX_SEQ_JUMP``) as a node gone wrong.
 MAX_BLOCK = 2**20
@@ -180,6 +184,14 @@ class UdpSender:
     at the first packet.
     """
 
+    def recv(self, timeout: float) -> bytes | None:
+        """One datagram sent back to this socket within ``timeout`` seconds, or None."""
+        self.sock.settimeout(max(timeout, 1e-3))
+        try:
+            return self.sock.recv(4096)
+        except (TimeoutError, ConnectionError):  # nothing yet; or an ICMP "port unreachable"
+            return None
+
     def __init__(self, host: str, port: int) -> None:
         try:
             info = socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
@@ -203,6 +215,45 @@ class UdpSender:
         self.close()
 
 
+def handshake(
+    sender: UdpSender,
+    node: int,
+    key: bytes,
+    seq: SequenceStore,
+    *,
+    timeout: float = HANDSHAKE_TIMEOUT,
+    clock: Callable[[], float] = time.monotonic,
+) -> tuple[float, float]:
+    """Say hello to the service until it answers; return ``(epoch, first sample time)``.
+
+    Each hello carries a fresh sequence number (a captured hello gets no answer), and only
+    an authentic start packet echoing one of them is taken (a captured answer is not).
+    After ``timeout`` seconds without one, :class:`~etobs.errors.InputError` names the
+    service's address. See :mod:`etobs.runtime.server` for the service's side.
+    """
+    asked: set[int] = set()
+    end = clock() + timeout
+    while clock() < end:
+        n = seq.next()
+        asked.add(n)
+        sender(encode(Packet(node, n, 0.0, (0.0,), hello=True), key))
+        retry = clock() + HELLO_RETRY
+        while (left := min(retry, end) - clock()) > 0:
+            data = sender.recv(left)
+            if data is None:
+                continue
+            try:
+                p = decode(data, {node: key})
+            except PacketError:
+                continue
+            if p.start and p.node == node and p.seq in asked and p.t >= 0:
+                return p.session, p.t
+    raise InputError(
+        f"no answer from the service at {sender.address[0]}:{sender.address[1]} after {timeout:g} s; "
+        "is `etobs serve SPEC` running there (without --epoch, or give the sensor its --epoch)?"
+    )
+
+
 def udp_sender(host: str, port: int) -> UdpSender:
     """A :class:`UdpSender` to ``(host, port)``."""
     return UdpSender(host, port)
@@ -218,6 +269,7 @@ def run(
     time_scale: float = 1.0,
     clock: Callable[[], float] = time.time,
     sleep: Callable[[float], object] = time.sleep,
+    first: float | None = None,
 ) -> int:
     """Sample at ``t_k = k period`` for ``t_k <= duration``; return the samples taken.
 
@@ -225,14 +277,16 @@ def run(
     ``epoch`` (a ``time.time()`` value shared with the service; default now, checked by
     :func:`check_epoch`), so a test can run a minute of plant time in a second. A node
     started after the epoch (e.g. restarted) begins at the first sample not yet due; a
-    sample that then falls behind the clock is taken at once (never skipped). ``clock``
-    and ``sleep`` let a test run the node on a clock of its own.
+    sample that then falls behind the clock is taken at once (never skipped). ``first``
+    (the service's answer to the hello, :func:`handshake`) is the first sample time to
+    take instead. ``clock`` and ``sleep`` let a test run the node on a clock of its own.
     """
     for name, value in (("period", period), ("duration", duration), ("time_scale", time_scale)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
             raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
     start = clock() if epoch is None else check_epoch(epoch, duration, time_scale, clock())
-    k = max(0, math.ceil((clock() - start) * time_scale / period - 1e-9))
+    since = (clock() - start) * time_scale if first is None else first
+    k = max(0, math.ceil(since / period - 1e-9))
     while k * period <= duration + 1e-12:
         t = k * period
         wait = start + t / time_scale - clock()

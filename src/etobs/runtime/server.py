@@ -16,6 +16,16 @@ time (see :class:`~etobs.runtime.service.ObserverCore`). Endpoints:
   ``HTTP_MAX_CLIENTS`` (or ``HTTP_MAX_PER_ADDRESS`` from one address) connections still
   being read, a new one evicts the oldest of them.
 
+**Start-up handshake** (``handshake=True``, what ``etobs serve`` does without
+``--epoch``): the service has no epoch until every node has said hello. A sensor that is
+ready (its samples computed) sends a *hello* packet (authenticated, a fresh sequence
+number, so a captured one gets no answer) every ``HELLO_RETRY`` seconds; once every node
+has, the epoch is set ``START_LEAD`` wall seconds ahead and each hello is answered with a
+*start* packet (the hello's number echoed, the epoch as its session, and the first sample
+time to take: 0 for a node not yet heard in this run, the current time for a sensor
+restarted mid-run). Sensors started one after another by hand, however late, all begin
+at t = 0. A hello after the start is answered at once.
+
 The trace is JSON lines, one object per ``tick`` of service time on the grid
 ``t = 0, tick, 2 tick, ...`` and one at the end (``t``, ``status``, ``xhat``, ``ybar``,
 ``transmissions``, ``gaps``, ``counts``, ...), read back by :func:`read_trace`. The grid
@@ -40,7 +50,7 @@ import numpy as np
 
 from etobs.errors import InputError
 from etobs.runtime.files import open_regular
-from etobs.runtime.packet import MAX_BYTES
+from etobs.runtime.packet import MAX_BYTES, Packet, encode
 from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
 
@@ -62,6 +72,9 @@ MAX_STEP_RATE = 1e5
 #: Trace lines at most written for the time before a run starts (1000 s at the 10-ms tick):
 #: a service started on an old epoch does not write every line since it first.
 MAX_BACKFILL_LINES = 100_000
+#: Wall seconds between the last hello and the epoch: every sensor gets its answer before
+#: t = 0 (a sensor that does not still begins at t = 0, catching up).
+START_LEAD = 0.5
 #: Turns of the event loop spent reading waiting datagrams at the end of a run (a socket
 #: buffer holds a few thousand packets).
 DRAIN_TURNS = 100_000
@@ -87,7 +100,7 @@ class _Datagrams(asyncio.DatagramProtocol):
         self.server = server
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
-        self.server.receive(data)
+        self.server.receive(data, addr)
 
 
 class ObserverServer:
@@ -110,6 +123,9 @@ class ObserverServer:
         The bearer token ``GET /estimate`` requires (required on a non-loopback host).
     read_timeout : float
         Seconds a client has to send its whole request (and to take the answer).
+    handshake : bool
+        Without ``epoch``: set the epoch once every node has said hello (module docstring),
+        not when :meth:`start` runs.
 
     """
 
@@ -124,6 +140,7 @@ class ObserverServer:
         trace: str | Path | None = None,
         token: bytes | None = None,
         read_timeout: float = HTTP_TIMEOUT,
+        handshake: bool = False,
     ) -> None:
         for name, value in (("time_scale", time_scale), ("tick", tick), ("read_timeout", read_timeout)):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -141,6 +158,11 @@ class ObserverServer:
         if token is not None and len(token) < 16:
             raise InputError(f"`token` must have at least 16 bytes; got {len(token)}")
         self.core, self.time_scale = core, time_scale
+        self.handshake = handshake and epoch is None
+        self._hellos: dict[int, tuple[Any, int]] = {}  # node: (address, seq) of its last hello
+        self._started: asyncio.Event | None = None
+        if self.handshake:
+            core.session = -1.0  # no epoch yet: no packet's session (an epoch is > 0)
         self.epoch = epoch
         self.tick, self.hold_back, self.token = tick, hold_back, token
         self.trace_path = None if trace is None else Path(trace)
@@ -175,10 +197,51 @@ class ObserverServer:
         with contextlib.suppress(RuntimeError):  # the loop has closed: the service is done
             self._loop.call_soon_threadsafe(self.receive, data[: MAX_BYTES + 1])
 
-    def receive(self, data: bytes) -> str:
-        """Judge one datagram now (on the event loop); return its verdict."""
+    def receive(self, data: bytes, addr: Any = None) -> str:
+        """Judge one datagram now (on the event loop); return its verdict.
+
+        A hello from ``addr`` is answered there once the epoch is set (module docstring).
+        """
         self.received += 1
-        return self.core.receive(data, self.now())
+        verdict = self.core.receive(data, None if self.epoch is None else self.now())
+        if verdict == "hello" and addr is not None and self.core.last_hello is not None:
+            node, seq = self.core.last_hello
+            self._hellos[node] = (addr, seq)
+            if self.epoch is None and set(self._hellos) >= set(self.core.nodes):
+                self.epoch = time.time() + START_LEAD
+                if self._started is not None:
+                    self._started.set()
+                for i in sorted(self._hellos):
+                    self._answer_hello(i)
+            elif self.epoch is not None:
+                self._answer_hello(node)
+        return verdict
+
+    def waiting_for(self) -> list[int]:
+        """The nodes whose hello the handshake still waits for."""
+        return [i for i in sorted(self.core.nodes) if i not in self._hellos]
+
+    def _answer_hello(self, node: int) -> None:
+        """The start packet for ``node``'s last hello: epoch, and the first sample to take."""
+        assert self.epoch is not None and self._transport is not None
+        self.core.flush()  # the hello's number on record before it is acted on
+        addr, seq = self._hellos[node]
+        first = max(0.0, self.now()) if self.core.nodes[node].heard else 0.0
+        packet = Packet(node, seq, first, (0.0,), session=self.epoch, start=True)
+        self._transport.sendto(encode(packet, self.core.keys[node]), addr)
+
+    async def wait_start(self, timeout: float) -> None:
+        """Wait until the handshake has set the epoch; after ``timeout`` s raise naming the nodes missing."""
+        if self.epoch is not None:
+            return
+        assert self._started is not None, "start() first"
+        try:
+            await asyncio.wait_for(self._started.wait(), timeout)
+        except TimeoutError:
+            raise InputError(
+                f"no hello from nodes {self.waiting_for()} after {timeout:g} s: start each with "
+                "`etobs sensor SPEC --node i` (or give every process the same --epoch)"
+            ) from None
 
     def now(self) -> float:
         """Service time."""
@@ -198,8 +261,9 @@ class ObserverServer:
                 f"GET /estimate on {http_host!r}, not a loopback address, needs a token "
                 "(`runtime.http_token_file`); without one it would show the estimate to anyone"
             )
-        if self.epoch is None:
+        if self.epoch is None and not self.handshake:
             self.epoch = time.time()
+        self._started = asyncio.Event()
         loop = self._loop = asyncio.get_running_loop()
         try:
             self._transport, _ = await loop.create_datagram_endpoint(

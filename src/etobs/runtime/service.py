@@ -16,6 +16,10 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
   the window of recent numbers or than a restart);
 * ``seq_jump`` if it is ``MAX_SEQ_JUMP`` or more above the last one accepted (a node
   never skips that many: accepting it would refuse the node's next packets as stale);
+* ``hello`` for a sensor's hello (any session: it asks the server for the epoch, see
+  :mod:`etobs.runtime.server`), if its sequence number is fresh (else ``replayed``,
+  ``stale`` or ``seq_jump`` as above); a ``start`` packet (the server's answer) sent
+  back to the service is ``malformed``;
 * ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
   (a wrong clock or epoch; accepting it would stall the observer);
 * otherwise accepted (``initial`` or ``applied``). It waits in a queue and is applied
@@ -74,6 +78,7 @@ VERDICTS = (
     "malformed",
     "forged",
     "wrong_size",
+    "hello",
 )
 #: A node's sequence numbers never jump by more: a restart skips at most one reserved block
 #: (1024 by default), so 2^32 is four million restarts between two packets the service saw.
@@ -183,6 +188,7 @@ class ObserverCore:
         self.max_lateness = 0.0
         self.nonfinite = False
         self.resumed = False  # whether the observer state was restored from the checkpoint
+        self.last_hello: tuple[int, int] | None = None  # (node, seq) of the last hello accepted
         self.session = float(session)
 
     @property
@@ -264,10 +270,9 @@ class ObserverCore:
         """
         if not math.isfinite(t):
             raise InputError(f"`t` must be a finite time; got {t!r}")
-        if self.marks is not None and (self._dirty or self.t - self._saved_t >= CHECKPOINT_EVERY):
-            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()}, self.checkpoint())
-            self._saved_t = self.t
-        self._dirty = False
+        if self.t - self._saved_t >= CHECKPOINT_EVERY:
+            self._dirty = True
+        self.flush()
         while self._queue and self._queue[0][0] <= t:
             tk, _, _, p = heapq.heappop(self._queue)
             if tk < self.t:  # arrived after the observer passed its time: acts from now
@@ -316,6 +321,10 @@ class ObserverCore:
         node = self.nodes.get(p.node)
         if node is None:  # a key exists but the problem has no such node
             return self._count("forged")
+        if p.start:  # the service's own answer to a hello, sent back to it
+            return self._count("malformed")
+        if p.hello:
+            return self._hello(node, p)
         if p.session != self.session:
             return self._refuse(node, "wrong_session")
         if len(p.values) != node.outputs.size:
@@ -345,6 +354,27 @@ class ObserverCore:
         node.last_t = max(node.last_t, p.t)
         heapq.heappush(self._queue, (node.last_t, p.node, p.seq, p))
         return self._count("initial" if p.initial else "applied")
+
+    def _hello(self, node: NodeState, p: Packet) -> str:
+        """A sensor ready to start (any session: it asks for the epoch); fresh numbers only."""
+        if p.seq in node.recent:
+            return self._count("replayed")
+        if p.seq <= node.last_seq:  # a captured hello gets no answer, in any run
+            return self._refuse(node, "stale")
+        if p.seq - node.last_seq >= MAX_SEQ_JUMP:
+            return self._count("seq_jump")
+        node.last_seq = p.seq
+        node.recent.append(p.seq)
+        self._dirty = True
+        self.last_hello = (p.node, p.seq)
+        return self._count("hello")
+
+    def flush(self) -> None:
+        """Write the marks (and the observer state) now if a packet was accepted since the last write."""
+        if self._dirty and self.marks is not None:
+            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()}, self.checkpoint())
+            self._saved_t = self.t
+        self._dirty = False
 
     def _refuse(self, node: NodeState, verdict: str) -> str:
         """Count an authentic packet refused as ``stale`` or ``wrong_session`` against its node."""
