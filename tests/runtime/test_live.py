@@ -100,6 +100,7 @@ def test_hostile_client_is_rejected_and_the_estimate_is_unharmed(tmp_path):
         "stale": 0,
         "initial": 1,
         "applied": sum(ref.transmissions),
+        "hello": 0,
     }
     assert c == expected and set(c) == set(VERDICTS)
     assert tuple(snap["transmissions"]) == ref.transmissions and snap["gaps"] == [0]
