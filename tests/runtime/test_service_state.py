@@ -132,7 +132,7 @@ def _packets(pb, t_end, period):
     for k in range(round(t_end / period) + 1):
         t = k * period
         for i, node in enumerate(nodes):
-            node.sample(t, [3.0 * math.cos(1.3 * t + i) + 0.5 * t])
+            node.sample(t, [30.0 * math.cos(4.0 * t + i) + 5.0 * t])
         out.append((t, list(inbox)))
         inbox.clear()
     return out
@@ -155,17 +155,26 @@ def test_a_restarted_service_resumes_its_observer_from_the_checkpoint(tmp_path):
     written with the marks, and goes on exactly as the run that was not interrupted."""
     pb = robot_arm()
     packets = _packets(pb, 2.0, 0.01)
-    undisturbed = _feed(_core(), packets)
+    whole = _core()
+    undisturbed = _feed(whole, packets)
     killed = _core(marks=HighWaterMarks(tmp_path / "s.state"))
-    _feed(killed, packets, t_to=1.0)  # killed after its advance to t = 1.0: nothing more is written
+    _feed(killed, packets, t_to=1.0)
+    # the packets of the next sample are received, and the service is killed before it applies
+    # them (they were lost with it before: the sensors send each once)
+    t_kill = next(t for t, data in packets if t > 1.0 and data)
+    for t, data in packets:
+        if 1.0 < t <= t_kill:
+            for d in data:
+                killed.receive(d, now=t)
     saved = json.loads((tmp_path / "s.state").read_text())
     assert saved["version"] == 2 and saved["observer"]["session"] == SESSION
     restarted = _core(marks=HighWaterMarks(tmp_path / "s.state"))
     snap = restarted.snapshot()
     assert restarted.resumed and snap["status"] == "ok" and None not in snap["xhat"]
-    assert saved["observer"]["t"] <= restarted.t <= 1.0
-    after = _feed(restarted, packets, t_from=1.0)
+    assert saved["observer"]["t"] <= restarted.t <= 1.0 and len(saved["observer"]["queue"]) > 0
+    after = _feed(restarted, packets, t_from=t_kill)
     assert restarted.counts["stale"] == restarted.counts["replayed"] == 0
+    assert restarted.snapshot()["transmissions"] == whole.snapshot()["transmissions"]  # counters go on
     gap = max(np.max(np.abs(after[t] - undisturbed[t])) for t in after)
     assert gap < 1e-9 * max(np.max(np.abs(undisturbed[t])) for t in after)
     # another session (a new epoch) starts afresh: the state belongs to the run it was written in

@@ -146,6 +146,11 @@ def _observer(raw: Any) -> dict[str, Any]:
         and isinstance(raw.get("heard"), list)
         and all(isinstance(i, int) for i in raw["heard"])
         and isinstance(raw.get("queue"), list)
+        and all(
+            isinstance(raw.get(key, []), list)
+            and all(isinstance(v, int) and v >= 0 for v in raw.get(key, []))
+            for key in ("transmissions", "gaps")
+        )
     )
     for entry in raw.get("queue", []) if ok else []:
         ok = ok and (

@@ -38,9 +38,9 @@ overrides a newer one.
 ``refused`` names it), else ``waiting`` while some node has not been heard in this
 session (``waiting`` lists them), else ``ok``.
 
-Before queued packets are applied, the high-water marks are written to their file
-(:class:`~etobs.runtime.marks.HighWaterMarks`), so a packet that acted on the estimate is
-refused after any restart. The observer state (``t``, ``z``, ``ybar``, the packets
+When a packet is accepted, the high-water marks are written to their file
+(:class:`~etobs.runtime.marks.HighWaterMarks`) before it can be applied, so a packet that
+acted on the estimate is refused after any restart. The observer state (``t``, ``z``, ``ybar``, the packets
 accepted but not yet applied) is written with them, and at least every
 ``CHECKPOINT_EVERY`` of service time: a service restarted on the same session resumes
 from it at once (integrating from the checkpoint's time reproduces the run it left).
@@ -218,6 +218,10 @@ class ObserverCore:
         self.nonfinite = cp["nonfinite"]
         for i in cp["heard"]:
             self.nodes[i].heard = True
+        for key in ("transmissions", "gaps"):  # the counters go on (version-2 files have them)
+            if len(cp.get(key, ())) == len(self.nodes):
+                for i, value in zip(sorted(self.nodes), cp[key], strict=True):
+                    setattr(self.nodes[i], key, value)
         for t_apply, node, seq, t, values, initial in cp["queue"]:
             p = Packet(node, seq, t, tuple(values), initial, self._session)
             heapq.heappush(self._queue, (t_apply, node, seq, p))
@@ -353,7 +357,11 @@ class ObserverCore:
             node.clock_back += 1
         node.last_t = max(node.last_t, p.t)
         heapq.heappush(self._queue, (node.last_t, p.node, p.seq, p))
-        return self._count("initial" if p.initial else "applied")
+        verdict = self._count("initial" if p.initial else "applied")
+        # on record at once, in the checkpoint's queue: a service killed before its next
+        # advance lost the packet (the sensor sends it once) and its estimate diverged
+        self.flush()
+        return verdict
 
     def _hello(self, node: NodeState, p: Packet) -> str:
         """A sensor ready to start (any session: it asks for the epoch); fresh numbers only."""
@@ -418,6 +426,8 @@ class ObserverCore:
             "nonfinite": self.nonfinite,
             "heard": [i for i in sorted(self.nodes) if self.nodes[i].heard],
             "queue": [[ta, i, s, p.t, list(p.values), p.initial] for ta, i, s, p in sorted(self._queue)],
+            "transmissions": [self.nodes[i].transmissions for i in sorted(self.nodes)],
+            "gaps": [self.nodes[i].gaps for i in sorted(self.nodes)],
         }
 
 
