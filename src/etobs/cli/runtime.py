@@ -178,7 +178,7 @@ def run_serve(args: argparse.Namespace) -> int:
     """The observer service until the spec's duration; print the final snapshot."""
     from etobs.runtime.marks import HighWaterMarks
     from etobs.runtime.packet import node_keys
-    from etobs.runtime.server import ObserverServer, to_json
+    from etobs.runtime.server import START_LEAD, ObserverServer, to_json
     from etobs.runtime.service import ObserverCore
 
     dep = load(args.spec)
@@ -225,12 +225,12 @@ def run_serve(args: argparse.Namespace) -> int:
                     flush=True,
                 )
                 await srv.wait_start(args.wait)
-                note = "every node said hello; t = 0 is"
+                note = f"every node said hello; t = 0 in {START_LEAD:g} s"
             else:
                 if given is None:  # stdin is read off the event loop
                     srv.epoch = await asyncio.to_thread(_epoch, args.epoch, dep)
-                note = "the same for every sensor: --epoch"
-            print(f"etobs serve: epoch {srv.epoch!r} ({note} {srv.epoch!r})", file=sys.stderr, flush=True)
+                note = f"the same for every sensor: --epoch {srv.epoch!r}"
+            print(f"etobs serve: epoch {srv.epoch!r} ({note})", file=sys.stderr, flush=True)
             if args.linger:  # the observer waits hold_back short of the end for late packets
                 return await srv.run_until(dep.duration, finished=lambda: False, linger=args.linger)
             return await srv.run_until(dep.duration)
