@@ -288,3 +288,56 @@ def test_a_block_that_would_reuse_numbers_is_refused(block):
     """``block = 0`` wrote the number about to be handed out as the bound: a restart reused it."""
     with pytest.raises(InputError, match=r"`block` must be an integer in 1..1048576; got"):
         SequenceStore(None, block=block)
+
+
+def test_hellos_need_fresh_numbers_and_a_start_packet_is_not_for_the_service():
+    """The handshake's packets: a captured hello gets no answer (replayed, or stale after
+    its number), and a start packet sent to the service is refused."""
+    core = _core()
+    hello = encode(Packet(0, 5, 0.0, (0.0,), session=0.0, hello=True), KEYS[0])
+    assert core.receive(hello) == "hello" and core.last_hello == (0, 5)
+    assert core.receive(hello) == "replayed"
+    assert core.receive(encode(Packet(0, 4, 0.0, (0.0,), session=0.0, hello=True), KEYS[0])) == "stale"
+    start = encode(Packet(0, 6, 0.0, (0.0,), session=SESSION, start=True), KEYS[0])
+    assert core.receive(start) == "malformed"
+    assert core.snapshot()["waiting"] == [0, 1]  # a hello is not a measurement
+    with pytest.raises(ValueError, match=r"at most one of initial, hello and start"):
+        encode(Packet(0, 1, 0.0, (0.0,), initial=True, hello=True), KEYS[0])
+
+
+def test_a_sensor_takes_only_the_answer_to_its_own_hello():
+    """A captured start packet (another hello's number, another node's, or forged) is
+    ignored; the answer that echoes this hello is taken; no answer ends with one line."""
+    from etobs.runtime.sensor import handshake
+
+    class Link:
+        address = ("127.0.0.1", 9)
+
+        def __init__(self, replies):
+            self.sent, self.replies = [], replies
+
+        def __call__(self, data):
+            self.sent.append(data)
+
+        def recv(self, timeout):
+            return self.replies.pop(0)(self.sent[-1]) if self.replies else None
+
+    def answer(node, key, *, seq=None, first=0.0):
+        def reply(hello):
+            n = seq if seq is not None else int.from_bytes(hello[8:16], "big")
+            return encode(Packet(node, n, first, (0.0,), session=1.7e9, start=True), key)
+
+        return reply
+
+    forged = node_keys(b"not the secret", [0])[0]
+    link = Link(
+        [answer(0, KEYS[0], seq=1), answer(1, KEYS[1]), answer(0, forged), answer(0, KEYS[0], first=2.5)]
+    )
+    store = SequenceStore()
+    store.next()  # number 1 was an earlier hello's: its captured answer must not be taken
+    assert handshake(link, 0, KEYS[0], store, timeout=60) == (1.7e9, 2.5)
+    ticks = iter(range(100))
+    with pytest.raises(
+        InputError, match=r"no answer from the service at 127.0.0.1:9 after 2 s; is `etobs serve"
+    ):
+        handshake(Link([]), 0, KEYS[0], SequenceStore(), timeout=2, clock=lambda: next(ticks) * 0.25)
