@@ -8,6 +8,7 @@ import json
 import math
 import os
 import threading
+from collections import deque
 
 import numpy as np
 import pytest
@@ -19,8 +20,8 @@ from etobs.examples import robot_arm
 from etobs.runtime.marks import HighWaterMarks
 from etobs.runtime.packet import Packet, encode, node_keys
 from etobs.runtime.sampled_rule import SampledRule
-from etobs.runtime.sensor import SensorNode, SequenceStore
-from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, ObserverCore
+from etobs.runtime.sensor import RESYNC_MIN_GAP, RESYNC_WINDOW, SensorNode, SequenceStore
+from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, RESYNC_TRIES, ObserverCore
 
 KEYS = node_keys(b"deployment secret", [0, 1])
 SESSION = 7.0
@@ -300,8 +301,10 @@ def test_hellos_need_fresh_numbers_and_a_start_packet_is_not_for_the_service():
     assert core.receive(encode(Packet(0, 4, 0.0, (0.0,), session=0.0, hello=True), KEYS[0])) == "stale"
     start = encode(Packet(0, 6, 0.0, (0.0,), session=SESSION, start=True), KEYS[0])
     assert core.receive(start) == "malformed"
+    resync = encode(Packet(0, 7, 0.0, (0.0,), session=SESSION, resync=True), KEYS[0])
+    assert core.receive(resync) == "malformed"  # a resync request is the service's too
     assert core.snapshot()["waiting"] == [0, 1]  # a hello is not a measurement
-    with pytest.raises(ValueError, match=r"at most one of initial, hello and start"):
+    with pytest.raises(ValueError, match=r"at most one of initial, hello, start and resync"):
         encode(Packet(0, 1, 0.0, (0.0,), initial=True, hello=True), KEYS[0])
 
 
@@ -341,3 +344,133 @@ def test_a_sensor_takes_only_the_answer_to_its_own_hello():
         InputError, match=r"no answer from the service at 127.0.0.1:9 after 2 s; is `etobs serve"
     ):
         handshake(Link([]), 0, KEYS[0], SequenceStore(), timeout=2, clock=lambda: next(ticks) * 0.25)
+
+
+def _cosim(pb, t, y, marks, *, down=None, listen=True):
+    """Sensors and service on one virtual clock; ``down = (t_kill, t_up)`` kills the service.
+
+    While it is down the sensors' datagrams are lost; at ``t_up`` a new service is started on
+    the same state file, and its resync requests reach the sensors' inboxes. Returns the
+    estimate at each sample, the sensors and the last core.
+    """
+    inbox = {i: deque() for i in range(pb.n_nodes)}
+    sent = []
+    nodes = [
+        SensorNode(
+            i,
+            KEYS[i],
+            SampledRule(nd.rule.sensor_spec(), t[1] - t[0]),
+            sent.append,
+            session=SESSION,
+            listen=(lambda q=inbox[i]: q.popleft() if q else None) if listen else None,
+        )
+        for i, nd in enumerate(pb.nodes)
+    ]
+    core, xhat, lost = _core(marks=HighWaterMarks(marks)), [], 0
+    core.in_sync = in_sync = []  # whether the held outputs are the sensors' sent values, per sample
+    for k, tk in enumerate(t):
+        if down is not None and down[0] <= tk < down[1]:
+            core = None
+        elif core is None:
+            core = _core(marks=HighWaterMarks(marks))
+            core.in_sync = in_sync
+            assert core.resumed
+        for i, nd in enumerate(pb.nodes):
+            nodes[i].sample(tk, y[k, list(nd.outputs)])
+        for d in sent:
+            if core is None:
+                lost += 1
+            elif core.receive(d, now=tk) in ("initial", "applied"):
+                core.note_address(core.last_node, ("127.0.0.1", 47000 + core.last_node))
+        sent.clear()
+        if core is None:
+            xhat.append(np.full(pb.plant.n_x, np.nan))
+            in_sync.append(False)
+            continue
+        core.advance(tk)
+        core.in_sync.append(core.ybar.tolist() == [v for n in nodes for v in n.sent])
+        for i, addr, d in core.resync_requests(tk):
+            assert addr == ("127.0.0.1", 47000 + i)
+            inbox[i].append(d)
+        xhat.append(core.xhat())
+    return np.array(xhat), nodes, core, lost
+
+
+def test_a_restarted_service_asks_its_sensors_to_resynchronise(tmp_path):
+    """SIGKILLed for 2.6 s, the service resumed from its checkpoint but the packets sent
+    meanwhile were lost and no sensor resent: its held outputs stayed off the sensors' (the
+    estimate 8.1 off the reference at the end). Now the restarted service asks each sensor
+    for its current value; within one sampling period the held outputs are the sensors'
+    again, and the estimate comes back to the undisturbed run's."""
+    pb, period = robot_arm(), 0.01
+    t = period * np.arange(round(12.0 / period) + 1)
+    # the outputs move while the service is down, then rest: no sensor's rule fires again
+    y = np.stack([3.0 - i + 4.0 * np.clip(t - 5.5, 0.0, 1.0) * (1 - 2 * i) for i in range(2)], axis=1)
+    whole, _, _, _ = _cosim(pb, t, y, tmp_path / "a.state")
+    down, up = (5.0, 7.6), round(7.6 / period)
+    runs = {
+        listen: _cosim(pb, t, y, tmp_path / f"{listen}.state", down=down, listen=listen)
+        for listen in (False, True)
+    }
+    # before: the sensors' 4 packets of the downtime lost, each sensor holding a value the
+    # service never got; 20 requests each (RESYNC_TRIES) unanswered, then no more
+    _, nodes, core, lost = runs[False]
+    assert lost == 4 and core.snapshot()["resync_asked"] == [RESYNC_TRIES] * 2
+    assert core.ybar.tolist() == [3.0, 2.0] and [n.sent for n in nodes] != [[3.0], [2.0]]
+    # now: one request each at t_up, answered at the next sample with the current value
+    _, nodes, core, lost = runs[True]
+    assert lost == 4 and core.snapshot()["resync_asked"] == [1, 1] and [n.resyncs for n in nodes] == [1, 1]
+    assert core.ybar.tolist() == [n.sent[0] for n in nodes] == y[-1].tolist() == [7.0, -2.0]
+    # the held outputs are the sensors' again one sampling period after the restart
+    assert core.in_sync[up : up + 2] == [False, True] and all(core.in_sync[up + 1 :])
+    dev = {k: np.max(np.abs(run[0] - whole), axis=1) for k, run in runs.items()}
+    assert dev[True][up] == dev[False][up] > 1.0  # the same error accumulated while down
+    assert dev[True][-1] < dev[False][-1] / 4
+
+
+def test_a_resync_request_forged_replayed_or_flooded_is_refused():
+    """A sensor answers only an authentic, fresh request of its session, at most once per
+    RESYNC_MIN_GAP: which requests were refused, by reason, counted."""
+    inbox, sent = deque(), []
+    rule = SampledRule(robot_arm().nodes[0].rule.sensor_spec(), 0.01)
+    node = SensorNode(
+        0, KEYS[0], rule, sent.append, session=SESSION, listen=lambda: inbox.popleft() if inbox else None
+    )
+
+    def ask(t, *, key=KEYS[0], node_id=0, session=SESSION, resync=True):
+        p = Packet(node_id, 12345, t, (0.0,), session=session, resync=resync, start=not resync)
+        return encode(p, key)
+
+    node.sample(0.0, [1.0])  # the initial value
+    first = ask(1.0)
+    inbox.extend(
+        [
+            ask(1.0, key=KEYS[1]),  # forged: not this node's key
+            ask(1.0, node_id=1, key=KEYS[1]),  # another node's request (read with our key: forged)
+            ask(1.0, resync=False),  # authentic, but a start packet, not a request
+            ask(1.0, session=SESSION + 1),  # a request of another run
+            ask(1.0 + RESYNC_WINDOW + 0.01),  # just outside the window ahead
+            ask(1.0 - RESYNC_WINDOW - 0.01),  # just outside the window behind
+            first,
+            first,  # the same request twice: a copy
+        ]
+    )
+    assert node.sample(1.0, [1.0]) is not None and node.resyncs == 1 and len(sent) == 2
+    assert node.resync_refused == {
+        "forged": 3,
+        "wrong_session": 1,
+        "out_of_window": 2,
+        "replayed": 1,
+        "rate_limited": 0,
+    }
+    # a flood of fresh requests: one answer per RESYNC_MIN_GAP, the rest counted
+    answered = 0
+    for k in range(1, 201):  # 2 s of samples, 8 requests each (MAX_READS), each newer
+        tk = 1.0 + 0.01 * k
+        inbox.extend(ask(tk - 0.001 * j) for j in range(8, 0, -1))
+        answered += node.sample(tk, [1.0]) is not None
+    assert answered == round(2.0 / RESYNC_MIN_GAP) == 4 and node.resyncs == 5  # at 1.5, 2.0, 2.5, 3.0
+    assert node.resync_refused["rate_limited"] == 200 * 8 - 4 and node.resync_refused["replayed"] == 1
+    # the window's boundary is inside
+    inbox.extend([ask(3.6 + RESYNC_WINDOW)])
+    assert node.sample(3.6, [1.0]) is not None and node.resyncs == 6

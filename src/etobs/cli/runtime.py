@@ -288,7 +288,8 @@ def run_sensor(args: argparse.Namespace) -> int:
             else:
                 epoch = _epoch(args.epoch, dep)
             rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
-            node = SensorNode(args.node, key, rule, send, seq, session=epoch)
+            listen = send.recv_nowait if dep.transport == "udp" else None  # resync requests (UDP only)
+            node = SensorNode(args.node, key, rule, send, seq, session=epoch, listen=listen)
             n = run(
                 node,
                 lambda t: y[round(t / dep.period), outputs],

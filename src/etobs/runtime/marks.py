@@ -151,6 +151,11 @@ def _observer(raw: Any) -> dict[str, Any]:
             and all(isinstance(v, int) and v >= 0 for v in raw.get(key, []))
             for key in ("transmissions", "gaps")
         )
+        and isinstance(raw.get("addresses", []), list)
+        and all(
+            a is None or (isinstance(a, list) and len(a) == 2 and isinstance(a[0], str) and type(a[1]) is int)
+            for a in raw.get("addresses", [])
+        )
     )
     for entry in raw.get("queue", []) if ok else []:
         ok = ok and (

@@ -8,7 +8,10 @@ Version 2, big-endian, 32-byte header, then the values, then the tag::
     3       1     flags (at most one set): bit 0 = initial value (sent at start-up, not a
                   transmission); bit 1 = hello (a sensor ready to start, asking for the
                   epoch); bit 2 = start (the service's answer to a hello: its sequence
-                  number echoed, the session = the epoch, t = the first sample to take)
+                  number echoed, the session = the epoch, t = the first sample to take);
+                  bit 3 = resync (the service asking the node for a fresh transmission: a
+                  random nonce as the sequence number, the session, t = the service's time;
+                  see :mod:`etobs.runtime.sensor`)
     4       2     node id (uint16)
     6       2     number of values n (uint16, 1..64)
     8       8     sequence number (uint64, increasing per node, never reused)
@@ -43,7 +46,8 @@ MAX_VALUES = 64
 FLAG_INITIAL = 0x01
 FLAG_HELLO = 0x02
 FLAG_START = 0x04
-_FLAGS = {0: "", FLAG_INITIAL: "initial", FLAG_HELLO: "hello", FLAG_START: "start"}
+FLAG_RESYNC = 0x08
+_FLAGS = {0: "", FLAG_INITIAL: "initial", FLAG_HELLO: "hello", FLAG_START: "start", FLAG_RESYNC: "resync"}
 HEADER = struct.Struct(">2sBBHHQdd")
 #: The largest datagram the format allows (64 values).
 MAX_BYTES = HEADER.size + 8 * MAX_VALUES + TAG_BYTES
@@ -69,6 +73,7 @@ class Packet:
     session: float = 0.0
     hello: bool = False
     start: bool = False
+    resync: bool = False
 
 
 def _tag(key: bytes, body: bytes) -> bytes:
@@ -82,9 +87,14 @@ def encode(packet: Packet, key: bytes) -> bytes:
         raise ValueError(f"a packet carries 1..{MAX_VALUES} values; got {n}")
     if not 0 <= packet.node < 2**16 or not 0 <= packet.seq < 2**64:
         raise ValueError(f"node id must fit in 16 bits and seq in 64; got {packet.node}, {packet.seq}")
-    flags = FLAG_INITIAL * packet.initial | FLAG_HELLO * packet.hello | FLAG_START * packet.start
+    flags = (
+        FLAG_INITIAL * packet.initial
+        | FLAG_HELLO * packet.hello
+        | FLAG_START * packet.start
+        | FLAG_RESYNC * packet.resync
+    )
     if flags not in _FLAGS:
-        raise ValueError("a packet is at most one of initial, hello and start")
+        raise ValueError("a packet is at most one of initial, hello, start and resync")
     body = HEADER.pack(MAGIC, VERSION, flags, packet.node, n, packet.seq, packet.t, packet.session)
     body += struct.pack(f">{n}d", *packet.values)
     return body + _tag(key, body)
@@ -119,6 +129,7 @@ def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
         session=session,
         hello=bool(flags & FLAG_HELLO),
         start=bool(flags & FLAG_START),
+        resync=bool(flags & FLAG_RESYNC),
     )
 
 

@@ -13,6 +13,17 @@ At its first sample the node sends its value flagged *initial* (the observer's s
 Sequence numbers never repeat, even across restarts: :class:`SequenceStore` reserves
 blocks of them in a file before using them. Every packet carries the deployment's session
 (its epoch), which binds it to the run it was measured in.
+
+**Resync.** A service restarted mid-run resumes its observer from its checkpoint, but
+what the nodes sent while it was down is lost, and each node believes the observer holds
+its last value. The service then asks each node, at the address its packets came from,
+for a fresh transmission (:meth:`etobs.runtime.service.ObserverCore.resync_requests`). A
+node given ``listen`` reads such requests at each sample (at most ``MAX_READS``) and takes
+one only if it is authentic (its own key), of its session, stamped within
+``RESYNC_WINDOW`` of its own time and later than the last one it took, and at least
+``RESYNC_MIN_GAP`` after its last answer; it then transmits its current value as at any
+transmission of its rule: ``ybar <- y(t_k)``, ``eta <- b eta`` (eqs. (14)-(15)). What it
+refused is counted in ``resync_refused`` by reason.
 """
 
 from __future__ import annotations
@@ -39,6 +50,14 @@ HANDSHAKE_TIMEOUT = 3600.0
 #: Largest block of sequence numbers reserved at once: a restart skips at most a block, and
 #: the service refuses a jump of 2^32 (``service.MAX_SEQ_JUMP``) as a node gone wrong.
 MAX_BLOCK = 2**20
+#: A resync request is taken only if stamped within this many seconds (node time) of the
+#: node's own time, and later than the last one taken: an old one replayed is refused.
+RESYNC_WINDOW = 1.0
+#: Node seconds between two answers to resync requests, at least: however many arrive, a
+#: node makes at most one extra transmission per this time (a flood is counted, not obeyed).
+RESYNC_MIN_GAP = 0.5
+#: Datagrams a node reads at most per sample (the rest wait, or the socket drops them).
+MAX_READS = 8
 
 
 def check_epoch(epoch: float, duration: float, time_scale: float, now: float, name: str = "`epoch`") -> float:
@@ -138,6 +157,13 @@ class SensorNode:
         The value last sent (the node's ``ybar``).
     session : float
         The deployment's epoch, carried in every packet (the service refuses another).
+    resyncs : int
+        Transmissions made because the service asked (module docstring), also counted in
+        ``transmissions``.
+    resync_refused : dict of str to int
+        Resync requests refused: ``forged``, ``wrong_session``, ``out_of_window``
+        (stamped too far from the node's time), ``replayed`` (not later than the last one
+        taken), ``rate_limited``.
 
     """
 
@@ -150,12 +176,20 @@ class SensorNode:
         seq: SequenceStore | None = None,
         *,
         session: float = 0.0,
+        listen: Callable[[], bytes | None] | None = None,
     ) -> None:
         self.node, self.key, self.rule, self._send = node, key, rule, send
         self.session = float(session)
         self.seq = seq if seq is not None else SequenceStore()
         self.sent: list[float] | None = None
         self.transmissions = 0
+        self._listen = listen
+        self.resyncs = 0
+        self.resync_refused = dict.fromkeys(
+            ("forged", "wrong_session", "out_of_window", "replayed", "rate_limited"), 0
+        )
+        self._resync_t = -math.inf  # the stamp of the last request taken
+        self._answered = -math.inf  # node time of the last answer
 
     def sample(self, t: float, y: Sequence[float]) -> Packet | None:
         """Take the sample ``y`` at time ``t``; return the packet sent, if any."""
@@ -164,12 +198,41 @@ class SensorNode:
         if self.sent is None:
             packet = Packet(self.node, self.seq.next(), t, tuple(y), initial=True, session=self.session)
             self._emit(packet, y)
+        asked = self._resync_asked(t)
         e = [s - v for s, v in zip(self.sent or y, y, strict=True)]
-        if self.rule.decide(e, y):
+        fired = self.rule.decide(e, y, force=asked)
+        if fired:
             packet = Packet(self.node, self.seq.next(), t, tuple(y), session=self.session)
             self._emit(packet, y)
             self.transmissions += 1
+            self.resyncs += asked
         return packet
+
+    def _resync_asked(self, t: float) -> bool:
+        """Whether a resync request taken now asks for a transmission at ``t`` (bounded reads)."""
+        taken = False
+        for _ in range(MAX_READS if self._listen is not None else 0):
+            data = self._listen()
+            if data is None:
+                break
+            try:
+                p = decode(data, {self.node: self.key})
+            except PacketError:
+                self.resync_refused["forged"] += 1
+                continue
+            if not p.resync or p.node != self.node:
+                self.resync_refused["forged"] += 1  # authentic but not a request to this node
+            elif p.session != self.session:
+                self.resync_refused["wrong_session"] += 1
+            elif not abs(p.t - t) <= RESYNC_WINDOW:
+                self.resync_refused["out_of_window"] += 1
+            elif p.t <= self._resync_t:
+                self.resync_refused["replayed"] += 1
+            elif taken or t - self._answered < RESYNC_MIN_GAP:
+                self.resync_refused["rate_limited"] += 1
+            else:
+                self._resync_t, self._answered, taken = p.t, t, True
+        return taken
 
     def _emit(self, packet: Packet, y: list[float]) -> None:
         self._send(encode(packet, self.key))
@@ -183,6 +246,13 @@ class UdpSender:
     The host is resolved once, here: a name that does not resolve is an error now, not
     at the first packet.
     """
+
+    def recv_nowait(self) -> bytes | None:
+        """One datagram already sent back to this socket, or None (never waits)."""
+        try:
+            return self.sock.recv(4096, socket.MSG_DONTWAIT)
+        except (BlockingIOError, ConnectionError):
+            return None
 
     def recv(self, timeout: float) -> bytes | None:
         """One datagram sent back to this socket within ``timeout`` seconds, or None."""

@@ -204,6 +204,12 @@ class ObserverServer:
         """
         self.received += 1
         verdict = self.core.receive(data, None if self.epoch is None else self.now())
+        if (
+            verdict in ("applied", "initial", "hello")
+            and addr is not None
+            and self.core.last_node is not None
+        ):
+            self.core.note_address(self.core.last_node, addr)
         if verdict == "hello" and addr is not None and self.core.last_hello is not None:
             node, seq = self.core.last_hello
             self._hellos[node] = (addr, seq)
@@ -318,6 +324,7 @@ class ObserverServer:
                         fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     k += 1
                 self.core.advance(target)
+                self._resync()
                 if target >= t_end:
                     if fh is not None and (k - 1) * self.tick < t_end:  # the end is always a line
                         fh.write(to_json(self.core.snapshot()).encode() + b"\n")
@@ -327,6 +334,13 @@ class ObserverServer:
         finally:
             if fh is not None:
                 fh.close()
+
+    def _resync(self) -> None:
+        """Send the resync requests due (a restarted service's nodes, :mod:`etobs.runtime.service`)."""
+        if self._transport is None:
+            return
+        for _, addr, data in self.core.resync_requests(self.now()):
+            self._transport.sendto(data, addr)
 
     async def _drain(self) -> None:
         """Read the datagrams already waiting, one per turn of the loop (bounded).

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import heapq
 import math
+import secrets
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -64,7 +65,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.runtime.marks import HighWaterMarks
-from etobs.runtime.packet import Packet, PacketError, decode, key_id
+from etobs.runtime.packet import Packet, PacketError, decode, encode, key_id
 
 VERDICTS = (
     "applied",
@@ -91,6 +92,10 @@ REFUSED_IN_A_ROW = 3
 #: Service time between two checkpoints of the observer state when no packet is accepted
 #: (a restart integrates at most this much again).
 CHECKPOINT_EVERY = 1.0
+#: Service seconds between two resync requests to a node that has not answered yet, and the
+#: most requests sent to it after a restart (a datagram may be lost; a node gone stays gone).
+RESYNC_RETRY = 0.1
+RESYNC_TRIES = 20
 
 
 @dataclass
@@ -108,6 +113,9 @@ class NodeState:
     clock_back: int = 0  # packets stamped before one accepted earlier (applied after it)
     refused: str = ""  # the verdict of the authentic packets refused in a row
     refused_in_a_row: int = 0
+    address: list[Any] | None = None  # [host, port] its packets came from (the reverse channel)
+    resync_asked: int = 0  # resync requests sent since the restart
+    resync_next: float = -math.inf  # service time of the next request, while it is owed one
 
 
 class ObserverCore:
@@ -189,6 +197,10 @@ class ObserverCore:
         self.nonfinite = False
         self.resumed = False  # whether the observer state was restored from the checkpoint
         self.last_hello: tuple[int, int] | None = None  # (node, seq) of the last hello accepted
+        self.last_node: int | None = None  # the node of the last packet accepted (or hello)
+        #: Nodes asked to transmit afresh: after a restart, what they sent while the service
+        #: was down is lost, and each believes the observer holds its last value.
+        self.resync_pending: set[int] = set()
         self.session = float(session)
 
     @property
@@ -222,6 +234,9 @@ class ObserverCore:
             if len(cp.get(key, ())) == len(self.nodes):
                 for i, value in zip(sorted(self.nodes), cp[key], strict=True):
                     setattr(self.nodes[i], key, value)
+        for i, addr in zip(sorted(self.nodes), cp.get("addresses", ()), strict=False):
+            self.nodes[i].address = addr
+        self.resync_pending = set(cp["heard"])
         for t_apply, node, seq, t, values, initial in cp["queue"]:
             p = Packet(node, seq, t, tuple(values), initial, self._session)
             heapq.heappush(self._queue, (t_apply, node, seq, p))
@@ -325,7 +340,7 @@ class ObserverCore:
         node = self.nodes.get(p.node)
         if node is None:  # a key exists but the problem has no such node
             return self._count("forged")
-        if p.start:  # the service's own answer to a hello, sent back to it
+        if p.start or p.resync:  # the service's own packets, sent back to it
             return self._count("malformed")
         if p.hello:
             return self._hello(node, p)
@@ -351,6 +366,8 @@ class ObserverCore:
         node.recent.append(p.seq)
         node.heard, node.refused, node.refused_in_a_row = True, "", 0
         self._dirty = True
+        self.last_node = p.node
+        self.resync_pending.discard(p.node)  # its current value, whatever was lost before
         if not p.initial:
             node.transmissions += 1
         if p.t < node.last_t:  # the sensor's clock went back: the newer number still wins
@@ -375,7 +392,35 @@ class ObserverCore:
         node.recent.append(p.seq)
         self._dirty = True
         self.last_hello = (p.node, p.seq)
+        self.last_node = p.node
         return self._count("hello")
+
+    def note_address(self, node: int, address: Any) -> None:
+        """Where ``node``'s last accepted packet came from: the resync requests go there."""
+        if isinstance(address, tuple | list) and len(address) >= 2:
+            addr = [str(address[0]), int(address[1])]
+            if addr != self.nodes[node].address:
+                self.nodes[node].address = addr
+                self._dirty = True
+
+    def resync_requests(self, now: float) -> list[tuple[int, tuple[str, int], bytes]]:
+        """The resync requests due at service time ``now``: ``(node, address, datagram)``.
+
+        A node heard before a restart is asked, every ``RESYNC_RETRY`` and at most
+        ``RESYNC_TRIES`` times, until a packet of it is accepted; each request carries the
+        session, ``now`` and a random nonce, authenticated with the node's key. The node
+        answers with a transmission of its current value (:mod:`etobs.runtime.sensor`).
+        """
+        out = []
+        for i in sorted(self.resync_pending):
+            nd = self.nodes[i]
+            if nd.address is None or nd.resync_asked >= RESYNC_TRIES or now < nd.resync_next:
+                continue
+            nd.resync_asked += 1
+            nd.resync_next = now + RESYNC_RETRY
+            p = Packet(i, secrets.randbits(63), now, (0.0,), session=self.session, resync=True)
+            out.append((i, (nd.address[0], nd.address[1]), encode(p, self.keys[i])))
+        return out
 
     def flush(self) -> None:
         """Write the marks (and the observer state) now if a packet was accepted since the last write."""
@@ -414,6 +459,7 @@ class ObserverCore:
             "counts": dict(self.counts),
             "late": self.late,
             "resumed": self.resumed,
+            "resync_asked": [nd.resync_asked for nd in nodes],
         }
 
     def checkpoint(self) -> dict[str, Any]:
@@ -428,6 +474,7 @@ class ObserverCore:
             "queue": [[ta, i, s, p.t, list(p.values), p.initial] for ta, i, s, p in sorted(self._queue)],
             "transmissions": [self.nodes[i].transmissions for i in sorted(self.nodes)],
             "gaps": [self.nodes[i].gaps for i in sorted(self.nodes)],
+            "addresses": [self.nodes[i].address for i in sorted(self.nodes)],
         }
 
 
