@@ -304,7 +304,8 @@ def run_sensor(args: argparse.Namespace) -> int:
             sent = 0 if node is None else node.transmissions
             print(json.dumps({"node": args.node, "transmissions": sent}))
             return 130
-    print(json.dumps({"node": args.node, "samples": n, "transmissions": node.transmissions}))
+    done = {"node": args.node, "samples": n, "transmissions": node.transmissions, "resyncs": node.resyncs}
+    print(json.dumps({**done, "resynced_at": node.resynced_at, "resync_refused": node.resync_refused}))
     return 0
 
 

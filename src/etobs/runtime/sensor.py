@@ -190,6 +190,8 @@ class SensorNode:
         )
         self._resync_t = -math.inf  # the stamp of the last request taken
         self._answered = -math.inf  # node time of the last answer
+        #: The node times of the resync answers (at most one per RESYNC_MIN_GAP: bounded).
+        self.resynced_at: list[float] = []
 
     def sample(self, t: float, y: Sequence[float]) -> Packet | None:
         """Take the sample ``y`` at time ``t``; return the packet sent, if any."""
@@ -206,6 +208,8 @@ class SensorNode:
             self._emit(packet, y)
             self.transmissions += 1
             self.resyncs += asked
+            if asked:
+                self.resynced_at.append(t)
         return packet
 
     def _resync_asked(self, t: float) -> bool:
