@@ -44,6 +44,10 @@ acted on the estimate is refused after any restart. The observer state (``t``, `
 accepted but not yet applied) is written with them, and at least every
 ``CHECKPOINT_EVERY`` of service time: a service restarted on the same session resumes
 from it at once (integrating from the checkpoint's time reproduces the run it left).
+The checkpoint also keeps the address each node's packets came from: a resumed service
+asks each node it had heard for a fresh transmission (:meth:`ObserverCore.resync_requests`,
+the sensor's side in :mod:`etobs.runtime.sensor`), since what the nodes sent while it was
+down is lost and none resends. A resync packet sent to the service is ``malformed``.
 Every rejection is counted by kind; nothing raises. If the observer's state stops being
 finite (an unstable observer, a too-large ``dt``), it stays at its last finite value and
 ``status`` says ``nonfinite``. The asyncio transports
