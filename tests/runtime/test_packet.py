@@ -137,15 +137,16 @@ def _pkt(node, seq, t, value, *, initial=False, session=7.0, key=None):
 
 
 def test_an_authentic_huge_sequence_number_does_not_lock_the_node_out():
-    """seq 2^64 - 1 from the node's own key was accepted and every later packet was stale."""
+    """seq 2^64 - 1 from the node's own key was accepted and every later packet was stale;
+    then a jump of exactly 2^32 still was (the bound was on the wrong side)."""
     from etobs.runtime.service import MAX_SEQ_JUMP
 
     core = _core()
     assert core.receive(_pkt(0, 2**64 - 1, 0.1, 1.0), now=0.1) == "seq_jump"
-    assert core.receive(_pkt(0, 2 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "seq_jump"
-    assert core.receive(_pkt(0, 1 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "applied"  # the bound itself
+    assert core.receive(_pkt(0, 1 + MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "seq_jump"  # the bound itself
+    assert core.receive(_pkt(0, MAX_SEQ_JUMP, 0.1, 1.0), now=0.1) == "applied"  # just below it
     assert core.receive(_pkt(1, 2, 0.1, 1.0), now=0.1) == "applied"
-    assert core.snapshot()["last_seq"] == [1 + MAX_SEQ_JUMP, 2]
+    assert core.snapshot()["last_seq"] == [MAX_SEQ_JUMP, 2]
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1.7e308, -1.0000001e12])
@@ -189,9 +190,11 @@ def test_high_water_marks_survive_a_restart_and_are_written_before_use(tmp_path)
     core = _core(marks=marks)
     packets = [_pkt(0, seq, 0.01 * seq, 1.0) for seq in range(2, 10)]
     assert {core.receive(d, now=1.0) for d in packets} == {"applied"}
-    assert not (tmp_path / "service.state").exists()  # nothing applied yet, nothing written
-    core.advance(0.05)  # before any packet acts, every accepted number is on record
+    # on record as soon as accepted, before any packet acts (a service killed before its next
+    # advance lost the accepted packets, and with them the estimate); still queued, none applied
     saved = json.loads((tmp_path / "service.state").read_text())
+    assert len(saved["observer"]["queue"]) == 2 + 8 and np.all(np.isnan(core.ybar))  # none applied
+    core.advance(0.05)
     assert saved["nodes"]["0"]["seq"] == 9 and saved["nodes"]["1"]["seq"] == 1
     from etobs.examples import robot_arm
     from etobs.runtime.service import ObserverCore

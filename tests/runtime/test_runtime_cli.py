@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from etobs.cli.main import main
@@ -70,26 +71,35 @@ def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
     with the same state file and epoch: it joins at the current time, every packet of
     both runs is accepted, none is stale or replayed, sequence numbers keep increasing.
 
-    The epoch is given once the process is ready (its plant samples computed), and the
-    run lasts a minute of wall time; each start waits for six packets, however slowly."""
+    It rested on a wall-clock window (a minute of wall time for both runs), and with both
+    cores busy the restarted sensor refused its epoch ("that run ended 3.98 s ago"). Each
+    process now runs on a virtual clock (:mod:`tests.runtime.virtual_clock`): the time it
+    slept, not the time it computed, and the restart is at a clock time the test chooses
+    (one plant second after the first run's last packet)."""
     spec = tmp_path / "deploy.toml"
     secret = _secret(tmp_path)
+    epoch, scale = 1.7e9, 10.0
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rx:
         rx.bind(("127.0.0.1", 0))
         rx.settimeout(1.0)
-        spec.write_text(SPEC.format(duration=600.0, scale=10.0, port=rx.getsockname()[1]))
-        cmd = [sys.executable, "-m", "etobs", "sensor", str(spec), "--node", "0", "--epoch", "-"]
-        cmd += ["--state", str(tmp_path / "n0.seq")]
-        got, epoch = [], None
+        spec.write_text(SPEC.format(duration=600.0, scale=scale, port=rx.getsockname()[1]))
+        args = [
+            "sensor",
+            str(spec),
+            "--node",
+            "0",
+            "--epoch",
+            repr(epoch),
+            "--state",
+            str(tmp_path / "n0.seq"),
+        ]
+        got, start = [], epoch
         for run in range(2):
             before = len(got)
-            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            cmd = [sys.executable, "-m", "tests.runtime.virtual_clock", repr(start), *args]
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
             try:
-                assert proc.stdout.readline().strip() == "ready"
-                epoch = epoch or repr(time.time())
-                proc.stdin.write(epoch + "\n")
-                proc.stdin.flush()
-                for _ in range(300):  # at most 300 s: only a broken run gets near it
+                for _ in range(600):  # at most 600 s: only a broken run gets near it
                     try:
                         got.append(rx.recv(4096))
                     except TimeoutError:
@@ -100,14 +110,15 @@ def test_killed_sensor_process_resumes_its_sequence_numbers(tmp_path):
                 proc.send_signal(signal.SIGKILL)
                 proc.communicate(timeout=60)
             assert len(got) >= before + 6, f"run {run}: only {len(got) - before} packets"
-    core = ObserverCore(linear.factory(), node_keys(secret.read_bytes(), [0]), session=float(epoch))
+            start = epoch + (struct.unpack(">d", got[-1][16:24])[0] + 1.0) / scale
+    core = ObserverCore(linear.factory(), node_keys(secret.read_bytes(), [0]), session=epoch)
     verdicts = [core.receive(d) for d in got]
     assert verdicts.count("initial") == 2 and set(verdicts) <= {"initial", "applied"}
     seqs = [struct.unpack(">Q", d[8:16])[0] for d in got]
     times = [struct.unpack(">d", d[16:24])[0] for d in got]
     assert seqs == sorted(set(seqs))
     second = verdicts.index("initial", 1)
-    assert times[second] > times[second - 1]  # the restarted node joined at the current time
+    assert times[second] > times[second - 1] + 1.0 - 1e-9  # the restarted node joined at its clock's time
     assert core.snapshot()["gaps"] == [0]
 
 
@@ -188,10 +199,17 @@ def test_runtime_spec_errors(tmp_path, capsys):
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=70000))
     _one_line_error(capsys, ["serve", str(spec)], r"`runtime.port` must be <= 65535; got 70000")
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0))
-    with pytest.raises(SystemExit) as e:
-        main(["sensor", str(spec), "--node", "0"])  # no --epoch: argparse names it
-    assert e.value.code == 2 and "--epoch" in capsys.readouterr().err
     _secret(tmp_path)  # so that the epoch is what is checked
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as nobody:  # bound, never answering
+        nobody.bind(("127.0.0.1", 0))
+        quiet = nobody.getsockname()[1]
+        spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=quiet))
+        _one_line_error(  # no --epoch: the sensor asks the service, which does not answer
+            capsys,
+            ["sensor", str(spec), "--node", "0", "--wait", "0.3"],
+            rf"no answer from the service at 127.0.0.1:{quiet} after 0.3 s; is `etobs serve SPEC` running",
+        )
+    spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0))
     _one_line_error(
         capsys, ["sensor", str(spec), "--node", "0", "--epoch", "nan"], r"--epoch must be .* got nan"
     )
@@ -330,3 +348,70 @@ def test_serve_refuses_an_observer_step_it_cannot_keep_up_with(tmp_path, capsys)
     spec = tmp_path / "deploy.toml"
     spec.write_text(SPEC.format(duration=1.0, scale=1.0, port=0).replace("[plant]", "dt = 1e-9\n[plant]"))
     _one_line_error(capsys, ["serve", str(spec)], r"steps per wall second; .* `runtime.dt`")
+
+
+def _free_udp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_documented_recipe_starts_every_sensor_at_t_0(tmp_path):
+    """docs/runtime.md's recipe followed literally: `etobs serve SPEC`, then `etobs sensor
+    SPEC --node i` in one terminal after another. The sensors joined about 9 plant-seconds
+    late (each computed its samples after the service's clock had started) and the run had
+    no triggered transmission. Now serve waits for every sensor's hello: the transmissions
+    are the offline reference's from t = 0, and so is the estimate along the whole trace."""
+    import tomllib
+
+    from etobs.runtime.deployment import parse_deployment
+    from etobs.runtime.replay import replay, sample_outputs
+    from etobs.runtime.server import read_trace
+
+    spec = tmp_path / "arm.toml"
+    spec.write_text(
+        '[system]\nfactory = "robot_arm"\n[runtime]\nperiod = 0.002\nduration = 3.5\ntime_scale = 3.5\n'
+        f'hold_back = 3.5\nport = {_free_udp_port()}\nsecret_file = "etobs.secret"\n'
+        "[plant]\nx0 = [3.0, 2.0, 3.0, -2.0]\n"
+    )
+    etobs = [sys.executable, "-m", "etobs"]
+    serve = subprocess.Popen(
+        [*etobs, "serve", str(spec), "--trace", str(tmp_path / "trace.jsonl"), "--linger", "10"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    sensors = []
+    try:
+        assert serve.stderr.readline().startswith("etobs serve: UDP")
+        assert "waiting for the hello of nodes [0, 1]" in serve.stderr.readline()
+        for i in range(2):  # one terminal after another: each computes its samples first
+            sensors.append(
+                subprocess.Popen(
+                    [*etobs, "sensor", str(spec), "--node", str(i)], stdout=subprocess.PIPE, text=True
+                )
+            )
+            assert sensors[-1].stdout.readline().strip() == "ready"
+        reports = [json.loads(p.communicate(timeout=600)[0].strip().splitlines()[-1]) for p in sensors]
+        out, err = serve.communicate(timeout=600)
+    finally:
+        for p in [serve, *sensors]:
+            if p.poll() is None:
+                p.kill()
+                p.communicate()
+    assert serve.returncode == 0 and "every node said hello" in err, err
+    snap = json.loads(out.strip().splitlines()[-1])
+    dep = parse_deployment(tomllib.loads(spec.read_text()), tmp_path)
+    pb = dep.problem()
+    keys = node_keys(dep.secret(), range(2))
+    t, y = sample_outputs(pb, list(dep.x0), dep.duration, dep.period)
+    ref = replay(pb, keys, t, y, dep.period, dt=dep.dt)
+    assert min(ref.transmissions) > 0  # the reference has triggered transmissions to miss
+    assert tuple(snap["transmissions"]) == ref.transmissions == tuple(r["transmissions"] for r in reports)
+    assert snap["counts"]["initial"] == 2 and snap["counts"]["hello"] >= 2 and snap["late"] == 0
+    assert snap["gaps"] == [0, 0] and snap["status"] == "ok"
+    tr = read_trace(tmp_path / "trace.jsonl")
+    assert tr["t"][0] == 0.0 and tr["t"][-1] == 3.5
+    k = np.rint(tr["t"] / dep.period).astype(int)
+    scale = np.max(np.abs(ref.xhat))
+    assert np.max(np.abs(tr["xhat"][1:] - ref.xhat[k[1:]])) < 1e-6 * scale

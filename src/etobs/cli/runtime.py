@@ -3,10 +3,12 @@
 ``serve SPEC`` runs the observer service until the spec's duration and prints its final
 estimate and counters (JSON); ``sensor SPEC --node i`` runs node ``i`` on the spec's
 simulated plant. They share a clock: time 0 is the epoch, a ``time.time()`` value.
-``serve`` takes ``--epoch`` or uses its start and prints it; every ``sensor`` must be
-given the same ``--epoch`` (a sensor started or restarted later joins at the current
-time). ``--epoch -`` reads it from standard input (how ``demo live`` starts every
-process at once after they are ready). ``demo live`` starts the service
+Without ``--epoch`` (UDP), they agree on it by a start-up handshake: ``serve`` waits
+until every node's sensor has said hello, then sets the epoch and tells each sensor,
+so sensors started one after another by hand all begin at t = 0; a sensor restarted
+mid-run joins at the current time (:mod:`etobs.runtime.server`). With ``--epoch E``
+(the same for every process, or ``-`` to read it from standard input, how ``demo live``
+starts every process at once after they are ready) there is no handshake. ``demo live`` starts the service
 in this process and one sensor process per node on 127.0.0.1, then compares the live
 run with the offline reference (same sensors and observer, no network).
 
@@ -40,6 +42,8 @@ MAX_SIMULATED_SAMPLES = 1e7
 #: How long ``demo live`` waits for a sensor process to compute its samples: only a broken
 #: one takes that long, even on a loaded machine compiling its model first.
 READY_TIMEOUT = 1800.0
+#: How long ``serve`` waits for every sensor's hello by default (``--wait``).
+HANDSHAKE_WAIT = 3600.0
 
 
 def load(name: str) -> Deployment:
@@ -53,7 +57,16 @@ def add_parsers(sub: Any) -> None:
     p = sub.add_parser("serve", help="run the observer service (UDP packets in, estimate out)")
     p.add_argument("spec", metavar="SPEC", help=f"deployment TOML, or a packaged one: {', '.join(PACKAGED)}")
     p.add_argument(
-        "--epoch", default=None, help="time.time() of service time 0, or '-' to read it from stdin"
+        "--epoch",
+        default=None,
+        help="time.time() of service time 0, or '-' to read it from stdin (default: set when every "
+        "sensor has said hello)",
+    )
+    p.add_argument(
+        "--wait",
+        type=_seconds,
+        default=HANDSHAKE_WAIT,
+        help=f"wall seconds to wait for every sensor's hello (default {HANDSHAKE_WAIT:g})",
     )
     p.add_argument("--trace", type=Path, default=None, help="write the trace (JSON lines) here")
     p.add_argument(
@@ -69,8 +82,14 @@ def add_parsers(sub: Any) -> None:
     s.add_argument("--node", type=int, required=True, help="node index (0-based)")
     s.add_argument(
         "--epoch",
-        required=True,
-        help="the service's epoch (printed by etobs serve), or '-' to read it from stdin",
+        default=None,
+        help="the service's epoch, or '-' to read it from stdin (default: ask the service, UDP)",
+    )
+    s.add_argument(
+        "--wait",
+        type=_seconds,
+        default=HANDSHAKE_WAIT,
+        help=f"wall seconds to wait for the service's answer to the hello (default {HANDSHAKE_WAIT:g})",
     )
     s.add_argument(
         "--state", type=Path, default=None, help="sequence-number file (default NODE.seq next to the secret)"
@@ -159,7 +178,7 @@ def run_serve(args: argparse.Namespace) -> int:
     """The observer service until the spec's duration; print the final snapshot."""
     from etobs.runtime.marks import HighWaterMarks
     from etobs.runtime.packet import node_keys
-    from etobs.runtime.server import ObserverServer, to_json
+    from etobs.runtime.server import START_LEAD, ObserverServer, to_json
     from etobs.runtime.service import ObserverCore
 
     dep = load(args.spec)
@@ -168,17 +187,23 @@ def run_serve(args: argparse.Namespace) -> int:
     core = ObserverCore(pb, keys, dt=dep.dt, marks=HighWaterMarks(dep.marks_file), max_value=dep.max_value)
     token = dep.token()
     given = None if args.epoch in (None, "-") else _epoch(args.epoch, dep)  # before anything opens
-    if args.trace is not None:
-        try:
-            open(args.trace, "w").close()  # written from the run's first tick on
-        except OSError as exc:
-            raise InputError(f"--trace {str(args.trace)!r} cannot be written: {exc.strerror or exc}") from exc
+    if args.trace is not None:  # written from the run's first tick on: refused now if it cannot be
+        from etobs.runtime.files import open_regular
+
+        open_regular(args.trace, "--trace", write=True).close()
+
+    shake = args.epoch is None and dep.transport == "udp"
 
     async def main() -> dict[str, Any]:
         srv = ObserverServer(
-            core, time_scale=dep.time_scale, hold_back=dep.hold_back, trace=args.trace, token=token
+            core,
+            epoch=given,
+            time_scale=dep.time_scale,
+            hold_back=dep.hold_back,
+            trace=args.trace,
+            token=token,
+            handshake=shake,
         )
-        srv.epoch = time.time()  # replaced below once the endpoints are open
         udp, web = await _open(srv, dep)
         receiver = None
         try:
@@ -192,13 +217,20 @@ def run_serve(args: argparse.Namespace) -> int:
             if token is not None:
                 web_note += f" (Authorization: Bearer <the token in {dep.token_file}>)"
             print(f"etobs serve: {where}{web_note}", file=sys.stderr, flush=True)
-            # stdin is read off the event loop
-            srv.epoch = given if given is not None else await asyncio.to_thread(_epoch, args.epoch, dep)
-            print(
-                f"etobs serve: epoch {srv.epoch!r} (give it to every sensor: --epoch)",
-                file=sys.stderr,
-                flush=True,
-            )
+            if shake:
+                print(
+                    f"etobs serve: waiting for the hello of nodes {srv.waiting_for()}: start each with "
+                    f"`etobs sensor {args.spec} --node i`",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                await srv.wait_start(args.wait)
+                note = f"every node said hello; t = 0 in {START_LEAD:g} s"
+            else:
+                if given is None:  # stdin is read off the event loop
+                    srv.epoch = await asyncio.to_thread(_epoch, args.epoch, dep)
+                note = f"the same for every sensor: --epoch {srv.epoch!r}"
+            print(f"etobs serve: epoch {srv.epoch!r} ({note})", file=sys.stderr, flush=True)
             if args.linger:  # the observer waits hold_back short of the end for late packets
                 return await srv.run_until(dep.duration, finished=lambda: False, linger=args.linger)
             return await srv.run_until(dep.duration)
@@ -222,7 +254,7 @@ def run_sensor(args: argparse.Namespace) -> int:
     from etobs.runtime.packet import derive_key
     from etobs.runtime.replay import sample_outputs
     from etobs.runtime.sampled_rule import SampledRule
-    from etobs.runtime.sensor import SensorNode, SequenceStore, run, udp_sender
+    from etobs.runtime.sensor import SensorNode, SequenceStore, check_epoch, handshake, run, udp_sender
 
     dep = load(args.spec)
     pb = dep.problem()
@@ -234,6 +266,10 @@ def run_sensor(args: argparse.Namespace) -> int:
     outputs = list(pb.nodes[args.node].outputs)
     key = derive_key(dep.secret(), args.node)
     seq = SequenceStore(args.state or dep.secret_file.with_name(f"node{args.node}.seq"))
+    if dep.transport == "mqtt" and args.epoch is None:
+        raise InputError(
+            "--epoch is needed with `runtime.transport` = 'mqtt' (the start-up handshake is UDP)"
+        )
     if dep.transport == "mqtt":
         from etobs.runtime.mqtt import MqttSender
 
@@ -245,9 +281,15 @@ def run_sensor(args: argparse.Namespace) -> int:
         node = None
         try:
             print("ready", flush=True)
-            epoch = _epoch(args.epoch, dep)
+            first = None
+            if args.epoch is None:  # ask the service (hello): every sensor begins at its t = 0
+                epoch, first = handshake(send, args.node, key, seq, timeout=args.wait)
+                check_epoch(epoch, dep.duration, dep.time_scale, time.time(), "the service's epoch")
+            else:
+                epoch = _epoch(args.epoch, dep)
             rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
-            node = SensorNode(args.node, key, rule, send, seq, session=epoch)
+            listen = send.recv_nowait if dep.transport == "udp" else None  # resync requests (UDP only)
+            node = SensorNode(args.node, key, rule, send, seq, session=epoch, listen=listen)
             n = run(
                 node,
                 lambda t: y[round(t / dep.period), outputs],
@@ -255,13 +297,15 @@ def run_sensor(args: argparse.Namespace) -> int:
                 dep.duration,
                 epoch=epoch,
                 time_scale=dep.time_scale,
+                first=first,
             )
         except KeyboardInterrupt:  # Ctrl-C: what was sent so far, no traceback
             print("etobs sensor: interrupted", file=sys.stderr)
             sent = 0 if node is None else node.transmissions
             print(json.dumps({"node": args.node, "transmissions": sent}))
             return 130
-    print(json.dumps({"node": args.node, "samples": n, "transmissions": node.transmissions}))
+    done = {"node": args.node, "samples": n, "transmissions": node.transmissions, "resyncs": node.resyncs}
+    print(json.dumps({**done, "resynced_at": node.resynced_at, "resync_refused": node.resync_refused}))
     return 0
 
 

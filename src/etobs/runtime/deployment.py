@@ -20,8 +20,10 @@ from etobs._spec import keys as _keys
 from etobs._spec import name as _name
 from etobs._spec import number as _number
 from etobs._validate import shown
+from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import locate_factory, make_problem
+from etobs.runtime.files import open_regular
 from etobs.runtime.server import is_loopback
 
 #: Largest secret or token read: they are 32 and 43 bytes.
@@ -33,9 +35,11 @@ def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
 
     With ``create`` a missing file is written with those bytes, mode 600. A file that the
     group or others may read is refused, naming its mode and the fix: its holder could
-    forge packets (the deployment secret) or read the estimate (the HTTP token).
+    forge packets (the deployment secret) or read the estimate (the HTTP token). It is
+    opened without blocking and refused unless it is a regular file (a FIFO hung
+    ``etobs serve`` in ``open()``): :func:`~etobs.runtime.files.open_regular`.
     """
-    if not path.exists():
+    if not path.exists() and not path.is_symlink():
         if create is None:
             raise SpecError(f"`{key}` {str(path)!r} does not exist; `etobs serve` creates it")
         try:
@@ -46,7 +50,7 @@ def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
         except OSError as exc:
             raise SpecError(f"`{key}` {str(path)!r} cannot be created: {exc.strerror or exc}") from exc
     try:
-        with open(path, "rb") as fh:  # the mode of the file that is read (no window to swap it)
+        with open_regular(path, f"`{key}`") as fh:  # the mode of the file that is read (no window to swap it)
             mode = stat.S_IMODE(os.fstat(fh.fileno()).st_mode)
             if os.name == "posix" and mode & 0o077:
                 raise SpecError(
@@ -54,6 +58,8 @@ def read_secret(path: Path, key: str, *, create: bytes | None = None) -> bytes:
                     f"run `chmod 600 {path}`"
                 )
             data = fh.read(MAX_SECRET_BYTES + 1)
+    except InputError as exc:  # not a regular file, or it cannot be opened
+        raise SpecError(str(exc)) from exc
     except OSError as exc:
         raise SpecError(f"`{key}` {str(path)!r} cannot be read: {exc}") from exc
     if len(data) > MAX_SECRET_BYTES:

@@ -5,7 +5,13 @@ Version 2, big-endian, 32-byte header, then the values, then the tag::
     offset  size  field
     0       2     magic b"ET"
     2       1     version (2)
-    3       1     flags: bit 0 = initial value (sent at start-up, not a transmission)
+    3       1     flags (at most one set): bit 0 = initial value (sent at start-up, not a
+                  transmission); bit 1 = hello (a sensor ready to start, asking for the
+                  epoch); bit 2 = start (the service's answer to a hello: its sequence
+                  number echoed, the session = the epoch, t = the first sample to take);
+                  bit 3 = resync (the service asking the node for a fresh transmission: a
+                  random nonce as the sequence number, the session, t = the service's time;
+                  see :mod:`etobs.runtime.sensor`)
     4       2     node id (uint16)
     6       2     number of values n (uint16, 1..64)
     8       8     sequence number (uint64, increasing per node, never reused)
@@ -38,6 +44,10 @@ VERSION = 2
 TAG_BYTES = 16
 MAX_VALUES = 64
 FLAG_INITIAL = 0x01
+FLAG_HELLO = 0x02
+FLAG_START = 0x04
+FLAG_RESYNC = 0x08
+_FLAGS = {0: "", FLAG_INITIAL: "initial", FLAG_HELLO: "hello", FLAG_START: "start", FLAG_RESYNC: "resync"}
 HEADER = struct.Struct(">2sBBHHQdd")
 #: The largest datagram the format allows (64 values).
 MAX_BYTES = HEADER.size + 8 * MAX_VALUES + TAG_BYTES
@@ -61,6 +71,9 @@ class Packet:
     values: tuple[float, ...]
     initial: bool = False
     session: float = 0.0
+    hello: bool = False
+    start: bool = False
+    resync: bool = False
 
 
 def _tag(key: bytes, body: bytes) -> bytes:
@@ -74,7 +87,14 @@ def encode(packet: Packet, key: bytes) -> bytes:
         raise ValueError(f"a packet carries 1..{MAX_VALUES} values; got {n}")
     if not 0 <= packet.node < 2**16 or not 0 <= packet.seq < 2**64:
         raise ValueError(f"node id must fit in 16 bits and seq in 64; got {packet.node}, {packet.seq}")
-    flags = FLAG_INITIAL if packet.initial else 0
+    flags = (
+        FLAG_INITIAL * packet.initial
+        | FLAG_HELLO * packet.hello
+        | FLAG_START * packet.start
+        | FLAG_RESYNC * packet.resync
+    )
+    if flags not in _FLAGS:
+        raise ValueError("a packet is at most one of initial, hello, start and resync")
     body = HEADER.pack(MAGIC, VERSION, flags, packet.node, n, packet.seq, packet.t, packet.session)
     body += struct.pack(f">{n}d", *packet.values)
     return body + _tag(key, body)
@@ -91,7 +111,7 @@ def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
     if len(data) > MAX_BYTES:
         raise PacketError("malformed", f"{len(data)} bytes is longer than the largest packet ({MAX_BYTES})")
     _, _, flags, node, n, seq, t, session = HEADER.unpack_from(data)
-    if not 1 <= n <= MAX_VALUES or len(data) != HEADER.size + 8 * n + TAG_BYTES or flags & ~FLAG_INITIAL:
+    if not 1 <= n <= MAX_VALUES or len(data) != HEADER.size + 8 * n + TAG_BYTES or flags not in _FLAGS:
         raise PacketError("malformed", f"{len(data)} bytes and n = {n} values, flags {flags:#x}, do not fit")
     key = keys.get(node)
     body, tag = data[:-TAG_BYTES], data[-TAG_BYTES:]
@@ -107,6 +127,9 @@ def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
         values=tuple(values),
         initial=bool(flags & FLAG_INITIAL),
         session=session,
+        hello=bool(flags & FLAG_HELLO),
+        start=bool(flags & FLAG_START),
+        resync=bool(flags & FLAG_RESYNC),
     )
 
 

@@ -11,7 +11,20 @@ time (see :class:`~etobs.runtime.service.ObserverCore`). Endpoints:
   UDP socket, so a service that takes packets from remote sensors does not also show
   its estimate to them): the current estimate and counters as JSON. With a ``token`` the
   request must carry ``Authorization: Bearer <token>`` (compared in constant time); a
-  non-loopback ``http_host`` requires one.
+  non-loopback ``http_host`` requires one. A request must be read whole within
+  ``read_timeout``; idle connections cannot deny the endpoint: beyond
+  ``HTTP_MAX_CLIENTS`` (or ``HTTP_MAX_PER_ADDRESS`` from one address) connections still
+  being read, a new one evicts the oldest of them.
+
+**Start-up handshake** (``handshake=True``, what ``etobs serve`` does without
+``--epoch``): the service has no epoch until every node has said hello. A sensor that is
+ready (its samples computed) sends a *hello* packet (authenticated, a fresh sequence
+number, so a captured one gets no answer) every ``HELLO_RETRY`` seconds; once every node
+has, the epoch is set ``START_LEAD`` wall seconds ahead and each hello is answered with a
+*start* packet (the hello's number echoed, the epoch as its session, and the first sample
+time to take: 0 for a node not yet heard in this run, the current time for a sensor
+restarted mid-run). Sensors started one after another by hand, however late, all begin
+at t = 0. A hello after the start is answered at once.
 
 The trace is JSON lines, one object per ``tick`` of service time on the grid
 ``t = 0, tick, 2 tick, ...`` and one at the end (``t``, ``status``, ``xhat``, ``ybar``,
@@ -36,14 +49,20 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
-from etobs.runtime.packet import MAX_BYTES
+from etobs.runtime.files import open_regular
+from etobs.runtime.packet import MAX_BYTES, Packet, encode
 from etobs.runtime.sensor import check_epoch
 from etobs.runtime.service import ObserverCore
 
-#: Idle or slow HTTP clients are dropped after this many seconds, and at most this many
-#: are served at once: a client cannot hold the service's sockets.
+#: Read deadline: a client whose request is not read whole within this many seconds is
+#: dropped (the default of ``read_timeout``).
 HTTP_TIMEOUT = 2.0
-HTTP_MAX_CLIENTS = 32
+#: Connections whose request is still being read, at most, in all and from one address. A
+#: new connection beyond either cap evicts the *oldest* such one (of that address), never
+#: itself: 32 idle connections, with the cap taken before the request was read, denied
+#: ``GET /estimate`` to everyone. 256 file descriptors stay well under the usual limit of 1024.
+HTTP_MAX_CLIENTS = 256
+HTTP_MAX_PER_ADDRESS = 64
 HTTP_MAX_HEADERS = 32
 #: Most observer steps per wall second (``time_scale / dt``). A step of the robot arm's
 #: observer takes about 70 us in Python, so this is several times more than a service
@@ -53,6 +72,9 @@ MAX_STEP_RATE = 1e5
 #: Trace lines at most written for the time before a run starts (1000 s at the 10-ms tick):
 #: a service started on an old epoch does not write every line since it first.
 MAX_BACKFILL_LINES = 100_000
+#: Wall seconds between the last hello and the epoch: every sensor gets its answer before
+#: t = 0 (a sensor that does not still begins at t = 0, catching up).
+START_LEAD = 0.5
 #: Turns of the event loop spent reading waiting datagrams at the end of a run (a socket
 #: buffer holds a few thousand packets).
 DRAIN_TURNS = 100_000
@@ -78,7 +100,7 @@ class _Datagrams(asyncio.DatagramProtocol):
         self.server = server
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
-        self.server.receive(data)
+        self.server.receive(data, addr)
 
 
 class ObserverServer:
@@ -99,6 +121,11 @@ class ObserverServer:
         Where to write the trace.
     token : bytes, optional
         The bearer token ``GET /estimate`` requires (required on a non-loopback host).
+    read_timeout : float
+        Seconds a client has to send its whole request (and to take the answer).
+    handshake : bool
+        Without ``epoch``: set the epoch once every node has said hello (module docstring),
+        not when :meth:`start` runs.
 
     """
 
@@ -112,8 +139,10 @@ class ObserverServer:
         hold_back: float = 0.05,
         trace: str | Path | None = None,
         token: bytes | None = None,
+        read_timeout: float = HTTP_TIMEOUT,
+        handshake: bool = False,
     ) -> None:
-        for name, value in (("time_scale", time_scale), ("tick", tick)):
+        for name, value in (("time_scale", time_scale), ("tick", tick), ("read_timeout", read_timeout)):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise InputError(f"`{name}` must be a finite number > 0; got {value!r}")
         if not (isinstance(hold_back, int | float) and math.isfinite(hold_back) and hold_back >= 0):
@@ -129,6 +158,11 @@ class ObserverServer:
         if token is not None and len(token) < 16:
             raise InputError(f"`token` must have at least 16 bytes; got {len(token)}")
         self.core, self.time_scale = core, time_scale
+        self.handshake = handshake and epoch is None
+        self._hellos: dict[int, tuple[Any, int]] = {}  # node: (address, seq) of its last hello
+        self._started: asyncio.Event | None = None
+        if self.handshake:
+            core.session = -1.0  # no epoch yet: no packet's session (an epoch is > 0)
         self.epoch = epoch
         self.tick, self.hold_back, self.token = tick, hold_back, token
         self.trace_path = None if trace is None else Path(trace)
@@ -136,6 +170,9 @@ class ObserverServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._http: asyncio.Server | None = None
         self._clients: set[asyncio.Task[None]] = set()
+        self.read_timeout = float(read_timeout)
+        #: Connections whose request is being read, oldest first, with their peer's address.
+        self._reading: dict[asyncio.Task[None], str] = {}
         self.received = 0  # datagrams handed to the core
 
     @property
@@ -160,10 +197,57 @@ class ObserverServer:
         with contextlib.suppress(RuntimeError):  # the loop has closed: the service is done
             self._loop.call_soon_threadsafe(self.receive, data[: MAX_BYTES + 1])
 
-    def receive(self, data: bytes) -> str:
-        """Judge one datagram now (on the event loop); return its verdict."""
+    def receive(self, data: bytes, addr: Any = None) -> str:
+        """Judge one datagram now (on the event loop); return its verdict.
+
+        A hello from ``addr`` is answered there once the epoch is set (module docstring).
+        """
         self.received += 1
-        return self.core.receive(data, self.now())
+        verdict = self.core.receive(data, None if self.epoch is None else self.now())
+        if (
+            verdict in ("applied", "initial", "hello")
+            and addr is not None
+            and self.core.last_node is not None
+        ):
+            self.core.note_address(self.core.last_node, addr)
+        if verdict == "hello" and addr is not None and self.core.last_hello is not None:
+            node, seq = self.core.last_hello
+            self._hellos[node] = (addr, seq)
+            if self.epoch is None and set(self._hellos) >= set(self.core.nodes):
+                self.epoch = time.time() + START_LEAD
+                if self._started is not None:
+                    self._started.set()
+                for i in sorted(self._hellos):
+                    self._answer_hello(i)
+            elif self.epoch is not None:
+                self._answer_hello(node)
+        return verdict
+
+    def waiting_for(self) -> list[int]:
+        """The nodes whose hello the handshake still waits for."""
+        return [i for i in sorted(self.core.nodes) if i not in self._hellos]
+
+    def _answer_hello(self, node: int) -> None:
+        """The start packet for ``node``'s last hello: epoch, and the first sample to take."""
+        assert self.epoch is not None and self._transport is not None
+        self.core.flush()  # the hello's number on record before it is acted on
+        addr, seq = self._hellos[node]
+        first = max(0.0, self.now()) if self.core.nodes[node].heard else 0.0
+        packet = Packet(node, seq, first, (0.0,), session=self.epoch, start=True)
+        self._transport.sendto(encode(packet, self.core.keys[node]), addr)
+
+    async def wait_start(self, timeout: float) -> None:
+        """Wait until the handshake has set the epoch; after ``timeout`` s raise naming the nodes missing."""
+        if self.epoch is not None:
+            return
+        assert self._started is not None, "start() first"
+        try:
+            await asyncio.wait_for(self._started.wait(), timeout)
+        except TimeoutError:
+            raise InputError(
+                f"no hello from nodes {self.waiting_for()} after {timeout:g} s: start each with "
+                "`etobs sensor SPEC --node i` (or give every process the same --epoch)"
+            ) from None
 
     def now(self) -> float:
         """Service time."""
@@ -183,8 +267,9 @@ class ObserverServer:
                 f"GET /estimate on {http_host!r}, not a loopback address, needs a token "
                 "(`runtime.http_token_file`); without one it would show the estimate to anyone"
             )
-        if self.epoch is None:
+        if self.epoch is None and not self.handshake:
             self.epoch = time.time()
+        self._started = asyncio.Event()
         loop = self._loop = asyncio.get_running_loop()
         try:
             self._transport, _ = await loop.create_datagram_endpoint(
@@ -218,11 +303,13 @@ class ObserverServer:
         """
         assert self.epoch is not None, "start() first"
         check_epoch(self.epoch, t_end, self.time_scale, time.time())
-        fh = open(self.trace_path, "w") if self.trace_path is not None else None
+        fh = open_regular(self.trace_path, "the trace", write=True) if self.trace_path is not None else None
         give_up = self.epoch + t_end / self.time_scale + linger
         # the next trace line is at k * tick: from 0, or at most MAX_BACKFILL_LINES before now for
         # a service started long after its epoch (`serve --epoch 1` wrote every line since 1970 first)
         k = max(0, math.floor((self.now() - self.hold_back) / self.tick) - MAX_BACKFILL_LINES)
+        # an observer resumed from its checkpoint starts there: no lines before its time
+        k = max(k, math.ceil(self.core.t / self.tick - 1e-9))
         try:
             while True:
                 done = finished is None or finished() or time.time() > give_up
@@ -234,18 +321,26 @@ class ObserverServer:
                 while k * self.tick <= target:  # bounded: (target - last target) / tick lines
                     self.core.advance(min(k * self.tick, t_end))
                     if fh is not None:
-                        fh.write(to_json(self.core.snapshot()) + "\n")
+                        fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     k += 1
                 self.core.advance(target)
+                self._resync()
                 if target >= t_end:
                     if fh is not None and (k - 1) * self.tick < t_end:  # the end is always a line
-                        fh.write(to_json(self.core.snapshot()) + "\n")
+                        fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     break
                 await asyncio.sleep(self.tick / self.time_scale / 2)
             return self.core.snapshot()
         finally:
             if fh is not None:
                 fh.close()
+
+    def _resync(self) -> None:
+        """Send the resync requests due (a restarted service's nodes, :mod:`etobs.runtime.service`)."""
+        if self._transport is None:
+            return
+        for _, addr, data in self.core.resync_requests(self.now()):
+            self._transport.sendto(data, addr)
 
     async def _drain(self) -> None:
         """Read the datagrams already waiting, one per turn of the loop (bounded).
@@ -271,26 +366,41 @@ class ObserverServer:
             await asyncio.gather(*self._clients, return_exceptions=True)
             await self._http.wait_closed()
 
+    def _make_room(self, host: str) -> None:
+        """Evict the oldest connection still being read, if a cap would be passed by one more."""
+        same = [t for t, h in self._reading.items() if h == host]
+        if len(same) >= HTTP_MAX_PER_ADDRESS:
+            victim = same[0]
+        elif len(self._reading) >= HTTP_MAX_CLIENTS:
+            victim = next(iter(self._reading))
+        else:
+            return
+        del self._reading[victim]
+        victim.cancel()  # its handler closes the connection
+
     async def _serve_http(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
         assert task is not None
-        if len(self._clients) >= HTTP_MAX_CLIENTS:
-            writer.close()
-            return
+        peer = writer.get_extra_info("peername")
+        host = str(peer[0]) if peer else ""
+        self._make_room(host)
         self._clients.add(task)
+        self._reading[task] = host
         try:
-            status, body, extra = await asyncio.wait_for(self._answer(reader), timeout=HTTP_TIMEOUT)
+            status, body, extra = await asyncio.wait_for(self._answer(reader), timeout=self.read_timeout)
+            self._reading.pop(task, None)
             head = (
                 f"HTTP/1.0 {status}\r\nContent-Type: application/json\r\n{extra}"
                 f"Content-Length: {len(body)}\r\n\r\n"
             )
             writer.write(head.encode() + body)
-            await writer.drain()
-        # a client that is slow, disconnects, sends junk or too long a line; or the service
-        # closing (CancelledError): the connection ends without a traceback
+            await asyncio.wait_for(writer.drain(), timeout=self.read_timeout)  # a client that reads nothing
+        # a client that is slow, disconnects, sends junk or too long a line; evicted for a newer
+        # one, or the service closing (CancelledError): the connection ends without a traceback
         except (TimeoutError, ConnectionError, UnicodeDecodeError, ValueError, asyncio.CancelledError):
             pass
         finally:
+            self._reading.pop(task, None)
             self._clients.discard(task)
             writer.close()
 

@@ -14,8 +14,12 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
 * ``replayed`` if its sequence number was already accepted (a copy);
 * ``stale`` if it is older than the last one accepted (overtaken, or a replay older than
   the window of recent numbers or than a restart);
-* ``seq_jump`` if it is more than ``MAX_SEQ_JUMP`` above the last one accepted (a node
+* ``seq_jump`` if it is ``MAX_SEQ_JUMP`` or more above the last one accepted (a node
   never skips that many: accepting it would refuse the node's next packets as stale);
+* ``hello`` for a sensor's hello (any session: it asks the server for the epoch, see
+  :mod:`etobs.runtime.server`), if its sequence number is fresh (else ``replayed``,
+  ``stale`` or ``seq_jump`` as above); a ``start`` packet (the server's answer) sent
+  back to the service is ``malformed``;
 * ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
   (a wrong clock or epoch; accepting it would stall the observer);
 * otherwise accepted (``initial`` or ``applied``). It waits in a queue and is applied
@@ -23,11 +27,30 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
   when it was measured); one whose time the observer has passed is applied at the next
   :meth:`ObserverCore.advance` and counted in ``late``.
 
-Before queued packets are applied, the high-water marks are written to their file
-(:class:`~etobs.runtime.marks.HighWaterMarks`), so a packet that acted on the estimate is
-refused after any restart. Every rejection is counted by kind; nothing raises. If the
-observer's state stops being finite (an unstable observer, a too-large ``dt``), it stays
-at its last finite value and ``status`` says ``nonfinite``. The asyncio transports
+The newest sequence number of a node wins over time stamps: a packet stamped earlier than
+one of its node accepted before (the sensor's clock went back) is applied at that later
+time, after it, and counted in the node's ``clock_back``; an older measurement never
+overrides a newer one.
+
+``status`` is ``nonfinite`` (below), else ``refusing`` when some node's last
+``REFUSED_IN_A_ROW`` authentic packets or more were all refused as ``stale`` or
+``wrong_session`` (its sequence file was reset, or it runs another epoch: the snapshot's
+``refused`` names it), else ``waiting`` while some node has not been heard in this
+session (``waiting`` lists them), else ``ok``.
+
+When a packet is accepted, the high-water marks are written to their file
+(:class:`~etobs.runtime.marks.HighWaterMarks`) before it can be applied, so a packet that
+acted on the estimate is refused after any restart. The observer state (``t``, ``z``, ``ybar``, the packets
+accepted but not yet applied) is written with them, and at least every
+``CHECKPOINT_EVERY`` of service time: a service restarted on the same session resumes
+from it at once (integrating from the checkpoint's time reproduces the run it left).
+The checkpoint also keeps the address each node's packets came from: a resumed service
+asks each node it had heard for a fresh transmission (:meth:`ObserverCore.resync_requests`,
+the sensor's side in :mod:`etobs.runtime.sensor`), since what the nodes sent while it was
+down is lost and none resends. A resync packet sent to the service is ``malformed``.
+Every rejection is counted by kind; nothing raises. If the observer's state stops being
+finite (an unstable observer, a too-large ``dt``), it stays at its last finite value and
+``status`` says ``nonfinite``. The asyncio transports
 (:mod:`etobs.runtime.server`) feed it.
 """
 
@@ -35,6 +58,7 @@ from __future__ import annotations
 
 import heapq
 import math
+import secrets
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -45,7 +69,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.runtime.marks import HighWaterMarks
-from etobs.runtime.packet import Packet, PacketError, decode, key_id
+from etobs.runtime.packet import Packet, PacketError, decode, encode, key_id
 
 VERDICTS = (
     "applied",
@@ -59,12 +83,23 @@ VERDICTS = (
     "malformed",
     "forged",
     "wrong_size",
+    "hello",
 )
 #: A node's sequence numbers never jump by more: a restart skips at most one reserved block
 #: (1024 by default), so 2^32 is four million restarts between two packets the service saw.
 MAX_SEQ_JUMP = 2**32
 #: Sample times beyond this many seconds (31,700 years) are no clock's.
 MAX_TIME = 1e12
+#: Authentic packets of a node refused in a row as ``stale`` or ``wrong_session`` before the
+#: status names it: one or two are a replay or a packet overtaken in the network.
+REFUSED_IN_A_ROW = 3
+#: Service time between two checkpoints of the observer state when no packet is accepted
+#: (a restart integrates at most this much again).
+CHECKPOINT_EVERY = 1.0
+#: Service seconds between two resync requests to a node that has not answered yet, and the
+#: most requests sent to it after a restart (a datagram may be lost; a node gone stays gone).
+RESYNC_RETRY = 0.1
+RESYNC_TRIES = 20
 
 
 @dataclass
@@ -77,6 +112,14 @@ class NodeState:
     recent: deque[int] = field(default_factory=lambda: deque(maxlen=256))
     transmissions: int = 0
     gaps: int = 0
+    heard: bool = False  # a packet accepted in this session
+    last_t: float = -math.inf  # the latest time a packet of this node is applied at
+    clock_back: int = 0  # packets stamped before one accepted earlier (applied after it)
+    refused: str = ""  # the verdict of the authentic packets refused in a row
+    refused_in_a_row: int = 0
+    address: list[Any] | None = None  # [host, port] its packets came from (the reverse channel)
+    resync_asked: int = 0  # resync requests sent since the restart
+    resync_next: float = -math.inf  # service time of the next request, while it is owed one
 
 
 class ObserverCore:
@@ -141,17 +184,89 @@ class ObserverCore:
             for i, nd in enumerate(problem.nodes)
         }
         self.marks = marks
+        self._checkpoint: dict[str, Any] | None = None  # the observer state on file, if any
         if marks is not None:
-            for i, seq in marks.load({i: nd.key_id for i, nd in self.nodes.items()}).items():
+            stored = marks.load({i: nd.key_id for i, nd in self.nodes.items()})
+            for i, seq in stored.items():
                 if i in self.nodes:
                     self.nodes[i].last_seq = seq
+            self._checkpoint = marks.observer
         self._dirty = False  # marks accepted but not yet written
+        self._saved_t = self.t  # service time of the last checkpoint
         self.counts = dict.fromkeys(VERDICTS, 0)
-        self.max_lead, self.max_value, self.session = float(max_lead), float(max_value), float(session)
-        self._queue: list[tuple[float, int, int, Packet]] = []  # (t, node, seq, packet)
+        self.max_lead, self.max_value = float(max_lead), float(max_value)
+        self._queue: list[tuple[float, int, int, Packet]] = []  # (time applied, node, seq, packet)
         self.late = 0
         self.max_lateness = 0.0
-        self.status = "ok"
+        self.nonfinite = False
+        self.resumed = False  # whether the observer state was restored from the checkpoint
+        self.last_hello: tuple[int, int] | None = None  # (node, seq) of the last hello accepted
+        self.last_node: int | None = None  # the node of the last packet accepted (or hello)
+        #: Nodes asked to transmit afresh: after a restart, what they sent while the service
+        #: was down is lost, and each believes the observer holds its last value.
+        self.resync_pending: set[int] = set()
+        self.session = float(session)
+
+    @property
+    def session(self) -> float:
+        """The session (epoch) packets must carry; setting it restores a checkpoint of that session."""
+        return self._session
+
+    @session.setter
+    def session(self, value: float) -> None:
+        self._session = float(value)
+        cp = self._checkpoint
+        if cp is not None and cp["session"] == self._session and not self.resumed:
+            self._restore(cp)
+
+    def _restore(self, cp: dict[str, Any]) -> None:
+        """The observer state of checkpoint ``cp`` (same session), before any packet of this run."""
+        n_z, n_y = self.z.size, self.ybar.size
+        if len(cp["z"]) != n_z or len(cp["ybar"]) != n_y or any(i not in self.nodes for i in cp["heard"]):
+            raise InputError(
+                f"the observer state in {str(self.marks.path) if self.marks else '?'!r} has "
+                f"{len(cp['z'])} states and {len(cp['ybar'])} outputs; this problem's observer has {n_z} "
+                f"and {n_y}: it is another deployment's; start a new epoch (omit --epoch)"
+            )
+        self.t, self._saved_t = cp["t"], cp["t"]
+        self.z = np.array(cp["z"], dtype=float)
+        self.ybar = np.array([np.nan if v is None else v for v in cp["ybar"]], dtype=float)
+        self.nonfinite = cp["nonfinite"]
+        for i in cp["heard"]:
+            self.nodes[i].heard = True
+        for key in ("transmissions", "gaps"):  # the counters go on (version-2 files have them)
+            if len(cp.get(key, ())) == len(self.nodes):
+                for i, value in zip(sorted(self.nodes), cp[key], strict=True):
+                    setattr(self.nodes[i], key, value)
+        for i, addr in zip(sorted(self.nodes), cp.get("addresses", ()), strict=False):
+            self.nodes[i].address = addr
+        self.resync_pending = set(cp["heard"])
+        for t_apply, node, seq, t, values, initial in cp["queue"]:
+            p = Packet(node, seq, t, tuple(values), initial, self._session)
+            heapq.heappush(self._queue, (t_apply, node, seq, p))
+            self.nodes[node].last_t = max(self.nodes[node].last_t, t_apply)
+        self.resumed = True
+
+    @property
+    def status(self) -> str:
+        """``nonfinite``, ``refusing``, ``waiting`` or ``ok`` (see the module docstring)."""
+        if self.nonfinite:
+            return "nonfinite"
+        if self.refused():
+            return "refusing"
+        return "waiting" if self.waiting() else "ok"
+
+    def waiting(self) -> list[int]:
+        """The nodes not heard in this session."""
+        return [i for i in sorted(self.nodes) if not self.nodes[i].heard]
+
+    def refused(self) -> list[dict[str, Any]]:
+        """The nodes whose last ``REFUSED_IN_A_ROW`` or more authentic packets were all refused."""
+        return [
+            {"node": i, "verdict": nd.refused, "in_a_row": nd.refused_in_a_row}
+            for i, nd in sorted(self.nodes.items())
+            if nd.refused_in_a_row >= REFUSED_IN_A_ROW
+        ]
 
     @property
     def ready(self) -> bool:
@@ -178,9 +293,9 @@ class ObserverCore:
         """
         if not math.isfinite(t):
             raise InputError(f"`t` must be a finite time; got {t!r}")
-        if self._dirty and self.marks is not None:
-            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()})
-        self._dirty = False
+        if self.t - self._saved_t >= CHECKPOINT_EVERY:
+            self._dirty = True
+        self.flush()
         while self._queue and self._queue[0][0] <= t:
             tk, _, _, p = heapq.heappop(self._queue)
             if tk < self.t:  # arrived after the observer passed its time: acts from now
@@ -193,7 +308,7 @@ class ObserverCore:
     def _integrate(self, t: float) -> None:
         if t <= self.t:
             return
-        if not self.ready or self.status != "ok":  # nothing (sound) to run on: the state waits
+        if not self.ready or self.nonfinite:  # nothing (sound) to run on: the state waits
             self.t = t
             return
         n = max(1, math.ceil((t - self.t) / self.dt - 1e-9))
@@ -208,7 +323,7 @@ class ObserverCore:
                 k4 = self._f(s + h, z + h * k3)
                 step = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
                 if not np.all(np.isfinite(step)) or not np.all(np.isfinite(self._psi(step))):
-                    self.status = "nonfinite"  # keep the last finite state; say so
+                    self.nonfinite = True  # keep the last finite state; say so
                     self.z, self.t = z, t
                     return
                 z = step
@@ -229,8 +344,12 @@ class ObserverCore:
         node = self.nodes.get(p.node)
         if node is None:  # a key exists but the problem has no such node
             return self._count("forged")
+        if p.start or p.resync:  # the service's own packets, sent back to it
+            return self._count("malformed")
+        if p.hello:
+            return self._hello(node, p)
         if p.session != self.session:
-            return self._count("wrong_session")
+            return self._refuse(node, "wrong_session")
         if len(p.values) != node.outputs.size:
             return self._count("wrong_size")
         if not all(math.isfinite(v) and abs(v) <= self.max_value for v in p.values) or not (
@@ -240,8 +359,8 @@ class ObserverCore:
         if p.seq in node.recent:
             return self._count("replayed")
         if p.seq <= node.last_seq:
-            return self._count("stale")
-        if p.seq - node.last_seq > MAX_SEQ_JUMP:
+            return self._refuse(node, "stale")
+        if p.seq - node.last_seq >= MAX_SEQ_JUMP:  # a jump of MAX_SEQ_JUMP itself is refused
             return self._count("seq_jump")
         if now is not None and p.t > now + self.max_lead:
             return self._count("future")
@@ -249,11 +368,76 @@ class ObserverCore:
             node.gaps += p.seq - node.last_seq - 1
         node.last_seq = p.seq
         node.recent.append(p.seq)
+        node.heard, node.refused, node.refused_in_a_row = True, "", 0
         self._dirty = True
+        self.last_node = p.node
+        self.resync_pending.discard(p.node)  # its current value, whatever was lost before
         if not p.initial:
             node.transmissions += 1
-        heapq.heappush(self._queue, (p.t, p.node, p.seq, p))
-        return self._count("initial" if p.initial else "applied")
+        if p.t < node.last_t:  # the sensor's clock went back: the newer number still wins
+            node.clock_back += 1
+        node.last_t = max(node.last_t, p.t)
+        heapq.heappush(self._queue, (node.last_t, p.node, p.seq, p))
+        verdict = self._count("initial" if p.initial else "applied")
+        # on record at once, in the checkpoint's queue: a service killed before its next
+        # advance lost the packet (the sensor sends it once) and its estimate diverged
+        self.flush()
+        return verdict
+
+    def _hello(self, node: NodeState, p: Packet) -> str:
+        """A sensor ready to start (any session: it asks for the epoch); fresh numbers only."""
+        if p.seq in node.recent:
+            return self._count("replayed")
+        if p.seq <= node.last_seq:  # a captured hello gets no answer, in any run
+            return self._refuse(node, "stale")
+        if p.seq - node.last_seq >= MAX_SEQ_JUMP:
+            return self._count("seq_jump")
+        node.last_seq = p.seq
+        node.recent.append(p.seq)
+        self._dirty = True
+        self.last_hello = (p.node, p.seq)
+        self.last_node = p.node
+        return self._count("hello")
+
+    def note_address(self, node: int, address: Any) -> None:
+        """Where ``node``'s last accepted packet came from: the resync requests go there."""
+        if isinstance(address, tuple | list) and len(address) >= 2:
+            addr = [str(address[0]), int(address[1])]
+            if addr != self.nodes[node].address:
+                self.nodes[node].address = addr
+                self._dirty = True
+
+    def resync_requests(self, now: float) -> list[tuple[int, tuple[str, int], bytes]]:
+        """The resync requests due at service time ``now``: ``(node, address, datagram)``.
+
+        A node heard before a restart is asked, every ``RESYNC_RETRY`` and at most
+        ``RESYNC_TRIES`` times, until a packet of it is accepted; each request carries the
+        session, ``now`` and a random nonce, authenticated with the node's key. The node
+        answers with a transmission of its current value (:mod:`etobs.runtime.sensor`).
+        """
+        out = []
+        for i in sorted(self.resync_pending):
+            nd = self.nodes[i]
+            if nd.address is None or nd.resync_asked >= RESYNC_TRIES or now < nd.resync_next:
+                continue
+            nd.resync_asked += 1
+            nd.resync_next = now + RESYNC_RETRY
+            p = Packet(i, secrets.randbits(63), now, (0.0,), session=self.session, resync=True)
+            out.append((i, (nd.address[0], nd.address[1]), encode(p, self.keys[i])))
+        return out
+
+    def flush(self) -> None:
+        """Write the marks (and the observer state) now if a packet was accepted since the last write."""
+        if self._dirty and self.marks is not None:
+            self.marks.save({i: (nd.key_id, nd.last_seq) for i, nd in self.nodes.items()}, self.checkpoint())
+            self._saved_t = self.t
+        self._dirty = False
+
+    def _refuse(self, node: NodeState, verdict: str) -> str:
+        """Count an authentic packet refused as ``stale`` or ``wrong_session`` against its node."""
+        node.refused_in_a_row = node.refused_in_a_row + 1 if node.refused == verdict else 1
+        node.refused = verdict
+        return self._count(verdict)
 
     def _hold(self, p: Packet) -> None:
         self.ybar[self.nodes[p.node].outputs] = p.values  # eq. (5): ybar_i+ = y_i(t_k)
@@ -268,13 +452,33 @@ class ObserverCore:
         return {
             "t": self.t,
             "status": self.status,
+            "waiting": self.waiting(),
+            "refused": self.refused(),
             "xhat": [_finite(v) for v in self.xhat()],
             "ybar": [_finite(v) for v in self.ybar],
             "transmissions": [nd.transmissions for nd in nodes],
             "last_seq": [nd.last_seq for nd in nodes],
             "gaps": [nd.gaps for nd in nodes],
+            "clock_back": [nd.clock_back for nd in nodes],
             "counts": dict(self.counts),
             "late": self.late,
+            "resumed": self.resumed,
+            "resync_asked": [nd.resync_asked for nd in nodes],
+        }
+
+    def checkpoint(self) -> dict[str, Any]:
+        """The observer state written with the marks: what a restart on this session resumes from."""
+        return {
+            "session": self.session,
+            "t": self.t,
+            "z": [float(v) for v in self.z],
+            "ybar": [_finite(v) for v in self.ybar],
+            "nonfinite": self.nonfinite,
+            "heard": [i for i in sorted(self.nodes) if self.nodes[i].heard],
+            "queue": [[ta, i, s, p.t, list(p.values), p.initial] for ta, i, s, p in sorted(self._queue)],
+            "transmissions": [self.nodes[i].transmissions for i in sorted(self.nodes)],
+            "gaps": [self.nodes[i].gaps for i in sorted(self.nodes)],
+            "addresses": [self.nodes[i].address for i in sorted(self.nodes)],
         }
 
 

@@ -1,0 +1,476 @@
+"""The service's state (issue 23): a status that says what it waits for and whom it refuses,
+the observer checkpointed with the marks and resumed after a restart, the newest sequence
+number winning over time stamps, the sequence-jump bound on both sides, files that are not
+regular refused without blocking, and sequence numbers never reused across restarts."""
+
+import itertools
+import json
+import math
+import os
+import threading
+from collections import deque
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from etobs.errors import InputError
+from etobs.examples import robot_arm
+from etobs.runtime.marks import HighWaterMarks
+from etobs.runtime.packet import Packet, encode, node_keys
+from etobs.runtime.sampled_rule import SampledRule
+from etobs.runtime.sensor import RESYNC_MIN_GAP, RESYNC_WINDOW, SensorNode, SequenceStore
+from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, RESYNC_TRIES, ObserverCore
+
+KEYS = node_keys(b"deployment secret", [0, 1])
+SESSION = 7.0
+
+
+def _pkt(node, seq, t, value, *, initial=False, session=SESSION):
+    return encode(Packet(node, seq, t, (value,), initial, session), KEYS[node])
+
+
+def _core(**kw):
+    return ObserverCore(robot_arm(), KEYS, session=SESSION, **kw)
+
+
+def test_the_status_waits_until_every_node_is_heard():
+    """It said "ok" having received nothing."""
+    core = _core()
+    snap = core.snapshot()
+    assert snap["status"] == "waiting" and snap["waiting"] == [0, 1] and snap["xhat"] is not None
+    assert core.receive(_pkt(0, 1, 0.0, 0.0, initial=True), now=0.0) == "initial"
+    assert core.snapshot()["status"] == "waiting" and core.snapshot()["waiting"] == [1]
+    assert core.receive(_pkt(1, 1, 0.0, 0.0, initial=True), now=0.0) == "initial"
+    snap = core.snapshot()
+    assert snap["status"] == "ok" and snap["waiting"] == [] and snap["refused"] == []
+
+
+@pytest.mark.parametrize("verdict", ["stale", "wrong_session"])
+def test_a_node_whose_packets_are_refused_in_a_row_is_named(verdict):
+    """After the sensors' sequence files were deleted, their packets were refused as stale
+    while the status said ok. The bound on both sides: REFUSED_IN_A_ROW - 1 refusals are a
+    replay or an overtaken packet (not named), REFUSED_IN_A_ROW name the node."""
+    core = _core()
+    for i in range(2):
+        assert core.receive(_pkt(i, 5000, 0.0, 0.0, initial=True), now=0.0) == "initial"
+
+    def refused(k):  # a node restarted without its sequence file (numbers from 1), or on another epoch
+        seq = k + 1 if verdict == "stale" else 6000 + k
+        return _pkt(1, seq, 0.1, 1.0, session=SESSION if verdict == "stale" else 8.0)
+
+    for k in range(REFUSED_IN_A_ROW - 1):
+        assert core.receive(refused(k), now=0.1) == verdict
+    assert core.snapshot()["status"] == "ok" and core.snapshot()["refused"] == []
+    assert core.receive(refused(REFUSED_IN_A_ROW), now=0.1) == verdict
+    snap = core.snapshot()
+    assert snap["status"] == "refusing"
+    assert snap["refused"] == [{"node": 1, "verdict": verdict, "in_a_row": REFUSED_IN_A_ROW}]
+    assert core.receive(_pkt(1, 5001, 0.2, 1.0), now=0.2) == "applied"  # a packet in: named no more
+    assert core.snapshot()["status"] == "ok" and core.snapshot()["refused"] == []
+
+
+def test_a_sensor_whose_sequence_file_was_deleted_is_named(tmp_path):
+    """The case of the trial: a real node whose file is gone starts again at 1 and is stale."""
+    pb = robot_arm()
+    core = ObserverCore(pb, KEYS, marks=HighWaterMarks(tmp_path / "s.state"))
+    inbox = []
+    spec = {"kind": "periodic", "period": 0.01}
+    for i in range(2):
+        core.receive(encode(Packet(i, 2000, 0.0, (0.0,), True), KEYS[i]))
+    core.advance(0.0)
+    node = SensorNode(1, KEYS[1], SampledRule(spec, 0.01), inbox.append, SequenceStore(tmp_path / "n1.seq"))
+    for k in range(REFUSED_IN_A_ROW + 1):
+        node.sample(0.01 * k, [1.0 + k])
+    assert [core.receive(d) for d in inbox][:2] == ["stale", "stale"]
+    assert core.snapshot()["status"] == "refusing" and core.snapshot()["refused"][0]["node"] == 1
+
+
+def test_the_newest_sequence_number_wins_over_time_stamps():
+    """A sensor clock going back made an older measurement override the newest one: packets
+    were applied in time-stamp order. Now the newer number is applied after the older one."""
+    core = _core()
+    for i in range(2):
+        core.receive(_pkt(i, 1, 0.0, 0.0, initial=True), now=0.0)
+    assert core.receive(_pkt(0, 2, 0.50, 5.0), now=0.5) == "applied"
+    assert core.receive(_pkt(0, 3, 0.45, 6.0), now=0.5) == "applied"  # newer, stamped earlier
+    assert core.receive(_pkt(1, 2, 0.47, 7.0), now=0.5) == "applied"  # another node: its own time
+    core.advance(0.48)
+    assert core.ybar.tolist() == [0.0, 7.0]  # node 0's newest waits for its older one
+    core.advance(0.6)
+    assert core.ybar.tolist() == [6.0, 7.0] and core.snapshot()["clock_back"] == [1, 0]
+    # once the older one was applied, a newer one stamped before it acts at once (late)
+    assert core.receive(_pkt(0, 4, 0.1, 8.0), now=0.6) == "applied"
+    core.advance(0.6)
+    assert core.ybar[0] == 8.0 and core.late == 1 and core.snapshot()["clock_back"] == [2, 0]
+
+
+@pytest.mark.parametrize(("jump", "verdict"), [(MAX_SEQ_JUMP - 1, "applied"), (MAX_SEQ_JUMP, "seq_jump")])
+def test_the_sequence_jump_bound_on_both_sides_and_across_a_restart(tmp_path, jump, verdict):
+    """One authentic packet with seq = last + 2^32 was accepted, its mark written, and the
+    node's next packets stale, across restarts too."""
+    marks = HighWaterMarks(tmp_path / "s.state")
+    core = _core(marks=marks)
+    for i in range(2):
+        core.receive(_pkt(i, 10, 0.0, 0.0, initial=True), now=0.0)
+    assert core.receive(_pkt(0, 10 + jump, 0.1, 1.0), now=0.1) == verdict
+    core.advance(0.2)  # the marks are written
+    restarted = _core(marks=marks)
+    expected = 10 + jump if verdict == "applied" else 10
+    assert restarted.snapshot()["last_seq"] == [expected, 10]
+    if verdict == "seq_jump":  # the node was not locked out: its next packet is applied
+        assert restarted.receive(_pkt(0, 11, 0.3, 2.0), now=0.3) == "applied"
+
+
+def _packets(pb, t_end, period):
+    """Packets of both nodes of the arm on smooth made-up outputs: [(t_k, [datagrams])]."""
+    inbox, out = [], []
+    nodes = [
+        SensorNode(i, KEYS[i], SampledRule(nd.rule.sensor_spec(), period), inbox.append, session=SESSION)
+        for i, nd in enumerate(pb.nodes)
+    ]
+    for k in range(round(t_end / period) + 1):
+        t = k * period
+        for i, node in enumerate(nodes):
+            node.sample(t, [30.0 * math.cos(4.0 * t + i) + 5.0 * t])
+        out.append((t, list(inbox)))
+        inbox.clear()
+    return out
+
+
+def _feed(core, packets, t_from=-1.0, t_to=math.inf):
+    xhat = {}
+    for t, data in packets:
+        if t_from < t <= t_to:
+            for d in data:
+                core.receive(d, now=t)
+            core.advance(t)
+            xhat[round(t, 9)] = core.xhat()
+    return xhat
+
+
+def test_a_restarted_service_resumes_its_observer_from_the_checkpoint(tmp_path):
+    """A service killed and restarted kept its marks but not its observer: no estimate until
+    every node had sent again (4.9 s in the trial). Now it resumes at once from the state
+    written with the marks, and goes on exactly as the run that was not interrupted."""
+    pb = robot_arm()
+    packets = _packets(pb, 2.0, 0.01)
+    whole = _core()
+    undisturbed = _feed(whole, packets)
+    killed = _core(marks=HighWaterMarks(tmp_path / "s.state"))
+    _feed(killed, packets, t_to=1.0)
+    # the packets of the next sample are received, and the service is killed before it applies
+    # them (they were lost with it before: the sensors send each once)
+    t_kill = next(t for t, data in packets if t > 1.0 and data)
+    for t, data in packets:
+        if 1.0 < t <= t_kill:
+            for d in data:
+                killed.receive(d, now=t)
+    saved = json.loads((tmp_path / "s.state").read_text())
+    assert saved["version"] == 2 and saved["observer"]["session"] == SESSION
+    restarted = _core(marks=HighWaterMarks(tmp_path / "s.state"))
+    snap = restarted.snapshot()
+    assert restarted.resumed and snap["status"] == "ok" and None not in snap["xhat"]
+    assert saved["observer"]["t"] <= restarted.t <= 1.0 and len(saved["observer"]["queue"]) > 0
+    after = _feed(restarted, packets, t_from=t_kill)
+    assert restarted.counts["stale"] == restarted.counts["replayed"] == 0
+    assert restarted.snapshot()["transmissions"] == whole.snapshot()["transmissions"]  # counters go on
+    gap = max(np.max(np.abs(after[t] - undisturbed[t])) for t in after)
+    assert gap < 1e-9 * max(np.max(np.abs(undisturbed[t])) for t in after)
+    # another session (a new epoch) starts afresh: the state belongs to the run it was written in
+    fresh = ObserverCore(pb, KEYS, session=SESSION + 1, marks=HighWaterMarks(tmp_path / "s.state"))
+    assert not fresh.resumed and fresh.t == 0.0 and fresh.snapshot()["status"] == "waiting"
+
+
+def test_a_checkpoint_of_another_problem_is_refused(tmp_path):
+    from tests.estimation import linear
+
+    marks = HighWaterMarks(tmp_path / "s.state")
+    core = ObserverCore(linear.factory(), KEYS, session=SESSION, marks=marks)
+    core.receive(_pkt(0, 1, 0.0, 0.0, initial=True), now=0.0)
+    core.advance(0.1)
+    with pytest.raises(
+        InputError, match=r"observer state in .*s.state' has 2 states and 1 outputs; .* has 4"
+    ):
+        _core(marks=marks)
+    saved = json.loads((tmp_path / "s.state").read_text())
+    saved["observer"]["z"] = ["x", 1.0]
+    (tmp_path / "s.state").write_text(json.dumps(saved))
+    with pytest.raises(
+        InputError, match=r"high-water marks .* are damaged \(the observer state is not one\)"
+    ):
+        _core(marks=marks)
+
+
+def _in_thread(fn, fifo):
+    """``fn()`` in a thread; a call that blocks on the FIFO is released and reported."""
+    box = {}
+
+    def call():
+        try:
+            box["value"] = fn()
+        except Exception as exc:  # the test looks at it
+            box["error"] = exc
+
+    thread = threading.Thread(target=call, daemon=True)
+    thread.start()
+    thread.join(30)
+    if thread.is_alive():  # release the open() that blocks, then fail
+        os.close(os.open(fifo, os.O_RDWR | os.O_NONBLOCK))
+        thread.join(30)
+        pytest.fail(f"{fn} blocked on the FIFO {fifo}")
+    return box
+
+
+@pytest.mark.parametrize("which", ["secret", "token", "state", "sequence", "trace"])
+def test_a_file_that_is_a_fifo_is_refused_without_blocking(tmp_path, which):
+    """A secret, state or token file that was a FIFO hung `etobs serve` in open(); a
+    sequence file hung the sensor."""
+    import tomllib
+    from dataclasses import replace
+
+    from etobs.runtime.deployment import parse_deployment
+    from etobs.runtime.files import open_regular
+
+    fifo = tmp_path / f"{which}.fifo"
+    os.mkfifo(fifo)
+    text = '[system]\nfactory = "robot_arm"\n[runtime]\nperiod = 0.01\nduration = 1.0\nhttp_port = 0\n'
+    dep = parse_deployment(tomllib.loads(text), tmp_path)
+    calls = {
+        "secret": lambda: replace(dep, secret_file=fifo).secret(create=True),
+        "token": lambda: replace(dep, http_token_file=fifo).token(),
+        "state": lambda: HighWaterMarks(fifo).load({0: "k"}),
+        "sequence": lambda: SequenceStore(fifo),
+        "trace": lambda: open_regular(fifo, "--trace", write=True),
+    }
+    box = _in_thread(calls[which], fifo)
+    assert isinstance(box.get("error"), InputError), box
+    message = str(box["error"])
+    assert len(message.splitlines()) == 1 and str(fifo) in message, message
+    assert "is a FIFO, not a regular file" in message or "cannot be opened: No such device" in message
+
+
+def test_a_folder_or_a_device_is_refused_naming_it(tmp_path):
+    from etobs.runtime.files import open_regular
+
+    with pytest.raises(InputError, match=r"`runtime.secret_file` '.*' is a folder, not a regular file"):
+        open_regular(tmp_path, "`runtime.secret_file`")
+    with pytest.raises(InputError, match=r"--trace '/dev/null' is a character device, not a regular file"):
+        open_regular("/dev/null", "--trace", write=True)
+    link = tmp_path / "link"
+    link.symlink_to(tmp_path / "target")
+    (tmp_path / "target").write_text("x")
+    with pytest.raises(InputError, match=r"the high-water marks '.*link' cannot be opened"):
+        open_regular(link, "the high-water marks", follow=False)
+    with open_regular(link, "`runtime.secret_file`") as fh:  # a secret may be a link (a mounted one)
+        assert fh.read() == b"x"
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    block=st.integers(1, 9),
+    takes=st.lists(st.integers(0, 25), min_size=1, max_size=8),
+)
+def test_sequence_numbers_strictly_increase_across_restarts(tmp_path_factory, block, takes):
+    """A restarted SequenceStore must never reuse a number, at a block boundary or anywhere:
+    the node takes ``takes[r]`` numbers in run ``r`` and is killed (no clean shutdown)."""
+    path = tmp_path_factory.mktemp("seq") / "node.seq"
+    got = []
+    for n in takes:
+        store = SequenceStore(path, block=block)
+        got += [store.next() for _ in range(n)]
+    assert all(b > a for a, b in itertools.pairwise(got)), got
+    assert got == [] or got[0] >= 1
+
+
+@pytest.mark.parametrize("block", [0, -1, 1.5, True, 2**20 + 1])
+def test_a_block_that_would_reuse_numbers_is_refused(block):
+    """``block = 0`` wrote the number about to be handed out as the bound: a restart reused it."""
+    with pytest.raises(InputError, match=r"`block` must be an integer in 1..1048576; got"):
+        SequenceStore(None, block=block)
+
+
+def test_hellos_need_fresh_numbers_and_a_start_packet_is_not_for_the_service():
+    """The handshake's packets: a captured hello gets no answer (replayed, or stale after
+    its number), and a start packet sent to the service is refused."""
+    core = _core()
+    hello = encode(Packet(0, 5, 0.0, (0.0,), session=0.0, hello=True), KEYS[0])
+    assert core.receive(hello) == "hello" and core.last_hello == (0, 5)
+    assert core.receive(hello) == "replayed"
+    assert core.receive(encode(Packet(0, 4, 0.0, (0.0,), session=0.0, hello=True), KEYS[0])) == "stale"
+    start = encode(Packet(0, 6, 0.0, (0.0,), session=SESSION, start=True), KEYS[0])
+    assert core.receive(start) == "malformed"
+    resync = encode(Packet(0, 7, 0.0, (0.0,), session=SESSION, resync=True), KEYS[0])
+    assert core.receive(resync) == "malformed"  # a resync request is the service's too
+    assert core.snapshot()["waiting"] == [0, 1]  # a hello is not a measurement
+    with pytest.raises(ValueError, match=r"at most one of initial, hello, start and resync"):
+        encode(Packet(0, 1, 0.0, (0.0,), initial=True, hello=True), KEYS[0])
+
+
+def test_a_sensor_takes_only_the_answer_to_its_own_hello():
+    """A captured start packet (another hello's number, another node's, or forged) is
+    ignored; the answer that echoes this hello is taken; no answer ends with one line."""
+    from etobs.runtime.sensor import handshake
+
+    class Link:
+        address = ("127.0.0.1", 9)
+
+        def __init__(self, replies):
+            self.sent, self.replies = [], replies
+
+        def __call__(self, data):
+            self.sent.append(data)
+
+        def recv(self, timeout):
+            return self.replies.pop(0)(self.sent[-1]) if self.replies else None
+
+    def answer(node, key, *, seq=None, first=0.0):
+        def reply(hello):
+            n = seq if seq is not None else int.from_bytes(hello[8:16], "big")
+            return encode(Packet(node, n, first, (0.0,), session=1.7e9, start=True), key)
+
+        return reply
+
+    forged = node_keys(b"not the secret", [0])[0]
+    link = Link(
+        [answer(0, KEYS[0], seq=1), answer(1, KEYS[1]), answer(0, forged), answer(0, KEYS[0], first=2.5)]
+    )
+    store = SequenceStore()
+    store.next()  # number 1 was an earlier hello's: its captured answer must not be taken
+    assert handshake(link, 0, KEYS[0], store, timeout=60) == (1.7e9, 2.5)
+    ticks = iter(range(100))
+    with pytest.raises(
+        InputError, match=r"no answer from the service at 127.0.0.1:9 after 2 s; is `etobs serve"
+    ):
+        handshake(Link([]), 0, KEYS[0], SequenceStore(), timeout=2, clock=lambda: next(ticks) * 0.25)
+
+
+def _cosim(pb, t, y, marks, *, down=None, listen=True):
+    """Sensors and service on one virtual clock; ``down = (t_kill, t_up)`` kills the service.
+
+    While it is down the sensors' datagrams are lost; at ``t_up`` a new service is started on
+    the same state file, and its resync requests reach the sensors' inboxes. Returns the
+    estimate at each sample, the sensors and the last core.
+    """
+    inbox = {i: deque() for i in range(pb.n_nodes)}
+    sent = []
+    nodes = [
+        SensorNode(
+            i,
+            KEYS[i],
+            SampledRule(nd.rule.sensor_spec(), t[1] - t[0]),
+            sent.append,
+            session=SESSION,
+            listen=(lambda q=inbox[i]: q.popleft() if q else None) if listen else None,
+        )
+        for i, nd in enumerate(pb.nodes)
+    ]
+    core, xhat, lost = _core(marks=HighWaterMarks(marks)), [], 0
+    core.in_sync = in_sync = []  # whether the held outputs are the sensors' sent values, per sample
+    for k, tk in enumerate(t):
+        if down is not None and down[0] <= tk < down[1]:
+            core = None
+        elif core is None:
+            core = _core(marks=HighWaterMarks(marks))
+            core.in_sync = in_sync
+            assert core.resumed
+        for i, nd in enumerate(pb.nodes):
+            nodes[i].sample(tk, y[k, list(nd.outputs)])
+        for d in sent:
+            if core is None:
+                lost += 1
+            elif core.receive(d, now=tk) in ("initial", "applied"):
+                core.note_address(core.last_node, ("127.0.0.1", 47000 + core.last_node))
+        sent.clear()
+        if core is None:
+            xhat.append(np.full(pb.plant.n_x, np.nan))
+            in_sync.append(False)
+            continue
+        core.advance(tk)
+        core.in_sync.append(core.ybar.tolist() == [v for n in nodes for v in n.sent])
+        for i, addr, d in core.resync_requests(tk):
+            assert addr == ("127.0.0.1", 47000 + i)
+            inbox[i].append(d)
+        xhat.append(core.xhat())
+    return np.array(xhat), nodes, core, lost
+
+
+def test_a_restarted_service_asks_its_sensors_to_resynchronise(tmp_path):
+    """SIGKILLed for 2.6 s, the service resumed from its checkpoint but the packets sent
+    meanwhile were lost and no sensor resent: its held outputs stayed off the sensors' (the
+    estimate 8.1 off the reference at the end). Now the restarted service asks each sensor
+    for its current value; within one sampling period the held outputs are the sensors'
+    again, and the estimate comes back to the undisturbed run's."""
+    pb, period = robot_arm(), 0.01
+    t = period * np.arange(round(12.0 / period) + 1)
+    # the outputs move while the service is down, then rest: no sensor's rule fires again
+    y = np.stack([3.0 - i + 4.0 * np.clip(t - 5.5, 0.0, 1.0) * (1 - 2 * i) for i in range(2)], axis=1)
+    whole, _, _, _ = _cosim(pb, t, y, tmp_path / "a.state")
+    down, up = (5.0, 7.6), round(7.6 / period)
+    runs = {
+        listen: _cosim(pb, t, y, tmp_path / f"{listen}.state", down=down, listen=listen)
+        for listen in (False, True)
+    }
+    # before: the sensors' 4 packets of the downtime lost, each sensor holding a value the
+    # service never got; 20 requests each (RESYNC_TRIES) unanswered, then no more
+    _, nodes, core, lost = runs[False]
+    assert lost == 4 and core.snapshot()["resync_asked"] == [RESYNC_TRIES] * 2
+    assert core.ybar.tolist() == [3.0, 2.0] and [n.sent for n in nodes] != [[3.0], [2.0]]
+    # now: one request each at t_up, answered at the next sample with the current value
+    _, nodes, core, lost = runs[True]
+    assert lost == 4 and core.snapshot()["resync_asked"] == [1, 1] and [n.resyncs for n in nodes] == [1, 1]
+    assert core.ybar.tolist() == [n.sent[0] for n in nodes] == y[-1].tolist() == [7.0, -2.0]
+    # the held outputs are the sensors' again one sampling period after the restart
+    assert core.in_sync[up : up + 2] == [False, True] and all(core.in_sync[up + 1 :])
+    dev = {k: np.max(np.abs(run[0] - whole), axis=1) for k, run in runs.items()}
+    assert dev[True][up] == dev[False][up] > 1.0  # the same error accumulated while down
+    assert dev[True][-1] < dev[False][-1] / 4
+
+
+def test_a_resync_request_forged_replayed_or_flooded_is_refused():
+    """A sensor answers only an authentic, fresh request of its session, at most once per
+    RESYNC_MIN_GAP: which requests were refused, by reason, counted."""
+    inbox, sent = deque(), []
+    rule = SampledRule(robot_arm().nodes[0].rule.sensor_spec(), 0.01)
+    node = SensorNode(
+        0, KEYS[0], rule, sent.append, session=SESSION, listen=lambda: inbox.popleft() if inbox else None
+    )
+
+    def ask(t, *, key=KEYS[0], node_id=0, session=SESSION, resync=True):
+        p = Packet(node_id, 12345, t, (0.0,), session=session, resync=resync, start=not resync)
+        return encode(p, key)
+
+    node.sample(0.0, [1.0])  # the initial value
+    first = ask(1.0)
+    inbox.extend(
+        [
+            ask(1.0, key=KEYS[1]),  # forged: not this node's key
+            ask(1.0, node_id=1, key=KEYS[1]),  # another node's request (read with our key: forged)
+            ask(1.0, resync=False),  # authentic, but a start packet, not a request
+            ask(1.0, session=SESSION + 1),  # a request of another run
+            ask(1.0 + RESYNC_WINDOW + 0.01),  # just outside the window ahead
+            ask(1.0 - RESYNC_WINDOW - 0.01),  # just outside the window behind
+            first,
+            first,  # the same request twice: a copy
+        ]
+    )
+    assert node.sample(1.0, [1.0]) is not None and node.resyncs == 1 and len(sent) == 2
+    assert node.resync_refused == {
+        "forged": 3,
+        "wrong_session": 1,
+        "out_of_window": 2,
+        "replayed": 1,
+        "rate_limited": 0,
+    }
+    # a flood of fresh requests: one answer per RESYNC_MIN_GAP, the rest counted
+    answered = 0
+    for k in range(1, 201):  # 2 s of samples, 8 requests each (MAX_READS), each newer
+        tk = 1.0 + 0.01 * k
+        inbox.extend(ask(tk - 0.001 * j) for j in range(8, 0, -1))
+        answered += node.sample(tk, [1.0]) is not None
+    assert answered == round(2.0 / RESYNC_MIN_GAP) == 4 and node.resyncs == 5  # at 1.5, 2.0, 2.5, 3.0
+    assert node.resync_refused["rate_limited"] == 200 * 8 - 4 and node.resync_refused["replayed"] == 1
+    # the window's boundary is inside
+    inbox.extend([ask(3.6 + RESYNC_WINDOW)])
+    assert node.sample(3.6, [1.0]) is not None and node.resyncs == 6
