@@ -23,6 +23,7 @@ import hashlib
 import io
 import os
 import pickle
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -75,10 +76,6 @@ def install_locator() -> None:
         caching.Cache._index_key = _index_key
 
 
-class Unverified(RuntimeError):
-    """A cache file whose checksum is missing or wrong; never escapes etobs (its entry is discarded)."""
-
-
 def install_checksums() -> None:
     """Write a SHA-256 into each cache file numba writes under :func:`cache_dir`, check it on load (once).
 
@@ -86,11 +83,12 @@ def install_checksums() -> None:
     bytes, written in one piece (numba writes a private file and renames it into place),
     so a file and its checksum never disagree but by damage. On load, the whole file is
     read and checked before numba unpickles it or LLVM parses its machine code; a file
-    whose checksum is wrong, or that has none, raises :class:`Unverified`, which the
-    callers turn into one warning and a new compile (:func:`discard`,
-    :func:`etobs.hybrid._jitcache.build`). A cache written before etobs checked its files
-    has no checksum and is discarded the same way, once: its bytes cannot be told from
-    damaged ones, and trusting them is what crashed Python. Files of numba caches
+    whose checksum is wrong, or that has none, is treated as absent, with one warning:
+    numba compiles the function and writes the entry again (no exception, so it works at
+    any depth: a helper compiled inside the estimation model as well). A cache written
+    before etobs checked its files has no checksum and is discarded the same way, with
+    one warning in all: its bytes cannot be told from damaged ones, and trusting them is
+    what crashed Python. Files of numba caches
     elsewhere (the user's own ``cache=True`` functions) are left as numba writes them.
     Cost: one SHA-256 pass over the entry at load (about 1 ms per MB).
     """
@@ -99,10 +97,7 @@ def install_checksums() -> None:
     cls = caching.IndexDataCacheFile
     if getattr(cls._load_data, "_etobs", False):
         return
-    numba_ = {
-        name: getattr(cls, name)
-        for name in ("save", "_save_index", "_load_index", "_save_data", "_load_data")
-    }
+    numba_ = {name: getattr(cls, name) for name in ("_save_index", "_load_index", "_save_data", "_load_data")}
 
     def _save_index(self: Any, overloads: dict) -> None:
         if not _ours(self._cache_path):
@@ -118,18 +113,14 @@ def install_checksums() -> None:
             raw = Path(self._index_path).read_bytes()
         except FileNotFoundError:
             return {}
-        stream = io.BytesIO(_opened(raw, self._index_path))
+        body = _opened(raw, self._index_path)
+        if body is None:
+            return {}
+        stream = io.BytesIO(body)
         if pickle.load(stream) != self._version:  # another numba wrote it: not ours to read
             return {}
         stamp, overloads = pickle.loads(stream.read())
         return overloads if stamp == self._source_stamp else {}
-
-    def save(self: Any, key: Any, data: Any) -> None:
-        try:
-            return numba_["save"](self, key, data)
-        except Unverified:  # numba reads the index to add to it: an unverified one is replaced
-            self._save_index({})
-            return numba_["save"](self, key, data)
 
     def _save_data(self: Any, name: str, data: Any) -> None:
         if not _ours(self._cache_path):
@@ -141,9 +132,10 @@ def install_checksums() -> None:
         if not _ours(self._cache_path):
             return numba_["_load_data"](self, name)
         path = self._data_path(name)
-        return pickle.loads(_opened(Path(path).read_bytes(), path))
+        body = _opened(Path(path).read_bytes(), path)
+        return None if body is None else pickle.loads(body)  # None: no entry, numba compiles
 
-    for method in (save, _save_index, _load_index, _save_data, _load_data):
+    for method in (_save_index, _load_index, _save_data, _load_data):
         method._etobs = True  # type: ignore[attr-defined]
         setattr(cls, method.__name__, method)
 
@@ -157,14 +149,33 @@ def _sealed(body: bytes) -> bytes:
     return MAGIC + hashlib.sha256(body).digest() + body
 
 
-def _opened(raw: bytes, path: str) -> bytes:
-    """The bytes numba wrote to ``path``, after checking their SHA-256 (:func:`install_checksums`)."""
+def _opened(raw: bytes, path: str) -> bytes | None:
+    """The bytes numba wrote to ``path``, checked by their SHA-256; ``None`` (one warning) if unverified."""
+    name = Path(path).name
     if not raw.startswith(MAGIC):
-        raise Unverified(f"{Path(path).name} has no checksum: written before etobs checked its cache")
+        _warn(
+            "etobs: the compile cache has files without a checksum (written before etobs checked them, "
+            f"{name} first); discarded them and compiled them again"
+        )
+        return None
     digest, body = raw[len(MAGIC) : len(MAGIC) + 32], raw[len(MAGIC) + 32 :]
     if hashlib.sha256(body).digest() != digest:
-        raise Unverified(f"{Path(path).name} does not match its SHA-256: damaged")
+        _warn(
+            f"etobs: the compile cache file {name} does not match its SHA-256: damaged; "
+            "discarded it and compiled it again"
+        )
+        return None
     return body
+
+
+_WARNED: set[str] = set()
+
+
+def _warn(message: str) -> None:
+    key = message.split("(")[0] if "without a checksum" in message else message  # an old cache: one warning
+    if key not in _WARNED:
+        _WARNED.add(key)
+        warnings.warn(message, RuntimeWarning, stacklevel=2)
 
 
 def discard(keys: list[str]) -> int:
