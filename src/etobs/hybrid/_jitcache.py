@@ -207,6 +207,7 @@ def _install_load_guard() -> None:
     """
     from numba.core import caching
 
+    _cache.install_checksums()
     load = caching.Cache.load_overload
     if getattr(load, "_etobs", False):
         return
