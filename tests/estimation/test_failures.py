@@ -329,3 +329,29 @@ def test_v_without_n_v_says_to_give_the_plant_n_v():
             [Node((0,), StaticRule(Quadratic(1.0), eps=0.01))],
             v=Sinusoid(amplitude=[0.1], omega=1.0),
         )
+
+
+@pytest.mark.parametrize("backend", ["engine", "scipy"])
+@pytest.mark.parametrize(
+    ("blows_up", "named"), [("plant", "the plant's state x"), ("observer", "the observer's state z")]
+)
+def test_a_nonfinite_run_says_whether_the_plant_or_the_observer_blew_up(backend, blows_up, named):
+    # issue 23: `nonfinite` did not say which part of the loop went to infinity. x' = x^2
+    # and z' = z^2 from 1 escape at t = 1 (ending nonfinite, or step_underflow while the
+    # state is still finite); the other part stays at most 1 in size.
+    escape = lambda s: s * s  # noqa: E731
+    calm = lambda s: -s  # noqa: E731
+    fp, fo = (escape, calm) if blows_up == "plant" else (calm, escape)
+    # y = 0: no transmission, so the blow-up is not cut short by jumps piling up (zeno)
+    plant = Plant(f_p=lambda t, x, u, v: fp(x), h=lambda x: 0.0 * x, n_x=1, n_y=1)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: fo(z), n_z=1)
+    rule = StaticRule(gamma=Quadratic(1.0), eps=1.0)
+    pb = EstimationProblem(plant, observer, [Node((0,), rule)])
+    with np.errstate(all="ignore"):
+        res = simulate(pb, [1.0], 2.0, z0=[1.0], backend=backend, save=SaveAt(steps=False))
+    assert res.status_labels()[0] in ("nonfinite", "step_underflow")
+    (message,) = res.messages()
+    assert named in message
+    assert res.solution.t_final[0] <= 1.0 + 1e-6
+    other = "the observer's state z" if blows_up == "plant" else "the plant's state x"
+    assert other not in message.split(";")[0]

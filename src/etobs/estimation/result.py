@@ -287,7 +287,26 @@ class EstimationResult:
 
     def messages(self) -> list[str]:
         """How each run ended, with the fix for failures."""
-        return self.solution.messages(STATUS_ADVICE)
+        sol = self.solution
+        # a blow-up ends `nonfinite`, or `step_underflow` when the state is still finite
+        blown = np.flatnonzero(np.isin(sol.status, (Status.NONFINITE, Status.STEP_UNDERFLOW)))
+        if blown.size:
+            details = list(sol.failures or ("",) * sol.n_runs)
+            for b in blown:
+                details[b] = "; ".join(d for d in (details[b], self._blown_up(int(b))) if d)
+            sol = replace(sol, failures=tuple(details))
+        return sol.messages(STATUS_ADVICE)
+
+    def _blown_up(self, run: int) -> str:
+        """Which of the plant and the observer blew up in ``run``, from its last state."""
+        lay, q = self.problem.layout, self.solution.x_final[run]
+        parts = {"the plant's state x": q[lay.x], "the observer's state z": q[lay.z]}
+        bad = [name for name, v in parts.items() if not np.all(np.isfinite(v))]
+        if bad:
+            return f"{' and '.join(bad)} {'is' if len(bad) == 1 else 'are'} not finite"
+        mx, mz = (float(np.max(np.abs(v), initial=0.0)) for v in parts.values())
+        larger = "the plant's state x" if mx >= mz else "the observer's state z"
+        return f"{larger} is the larger at the last state reached (max |x| = {mx:.3g}, max |z| = {mz:.3g})"
 
     def transmission_times(self, run: int, node: int) -> np.ndarray:
         """Transmission times of ``node`` in ``run``."""
