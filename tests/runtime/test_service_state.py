@@ -474,3 +474,37 @@ def test_a_resync_request_forged_replayed_or_flooded_is_refused():
     # the window's boundary is inside
     inbox.extend([ask(3.6 + RESYNC_WINDOW)])
     assert node.sample(3.6, [1.0]) is not None and node.resyncs == 6
+
+
+def test_a_udp_sender_polls_without_waiting_after_a_handshake_read():
+    # the handshake reads with a timeout (recv), then every sample polls for resync
+    # requests (recv_nowait): in timeout mode the poll waited out the timeout and raised
+    # TimeoutError, and every sensor of the documented recipe ended "etobs: error: timed out"
+    import socket
+
+    from etobs.runtime.sensor import UdpSender
+
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    try:
+        sender = UdpSender("127.0.0.1", peer.getsockname()[1])
+        try:
+            assert sender.recv(0.01) is None
+            assert sender.recv_nowait() is None  # raised TimeoutError before
+            sender(b"x")
+            data, addr = peer.recvfrom(16)
+            assert data == b"x"
+            peer.sendto(b"back", addr)
+            assert sender.recv(5.0) == b"back"
+            peer.sendto(b"again", addr)
+            for _ in range(1000):  # bounded: the datagram is on loopback already or soon
+                got = sender.recv_nowait()
+                if got is not None:
+                    break
+            else:
+                got = sender.recv(5.0)
+            assert got == b"again"
+        finally:
+            sender.close()
+    finally:
+        peer.close()

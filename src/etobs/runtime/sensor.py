@@ -253,10 +253,16 @@ class UdpSender:
 
     def recv_nowait(self) -> bytes | None:
         """One datagram already sent back to this socket, or None (never waits)."""
+        # non-blocking mode, not only MSG_DONTWAIT: after recv(timeout) the socket is in
+        # timeout mode, where Python waits for the timeout first and raises TimeoutError
+        # (every sensor started by the documented recipe failed with "timed out")
+        self.sock.settimeout(0.0)
         try:
-            return self.sock.recv(4096, socket.MSG_DONTWAIT)
+            return self.sock.recv(4096)
         except (BlockingIOError, ConnectionError):
             return None
+        finally:
+            self.sock.settimeout(None)  # sends block as they do before any handshake
 
     def recv(self, timeout: float) -> bytes | None:
         """One datagram sent back to this socket within ``timeout`` seconds, or None."""
