@@ -25,17 +25,22 @@ def _compile_cache(tmp_path_factory):
         os.environ.pop("ETOBS_CACHE_DIR", None)
 
 
-@pytest.fixture
-def dask_cluster():
+def local_cluster(threads_per_worker: int):
     """A Dask scheduler and one worker in this process, listening on 127.0.0.1 only."""
     distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
-    with distributed.LocalCluster(
+    return distributed.LocalCluster(
         n_workers=1,
-        threads_per_worker=2,
+        threads_per_worker=threads_per_worker,
         processes=False,
         protocol="tcp://",
         host="127.0.0.1",
         dashboard_address=None,
-    ) as cluster:
+    )
+
+
+@pytest.fixture
+def dask_cluster():
+    """A Dask scheduler and one worker of two threads (:func:`local_cluster`)."""
+    with local_cluster(2) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
         yield cluster

@@ -14,6 +14,7 @@ from etobs.errors import EtobsError
 from etobs.experiments import executors, parse_spec, run_sweep
 from etobs.experiments.store import ResultStore
 
+from ..conftest import local_cluster
 from .conftest import FACTORY, raw_spec
 
 
@@ -29,14 +30,7 @@ def test_a_sweep_whose_dask_workers_are_all_lost_ends_with_what_is_kept(tmp_path
         )
     )
     out = tmp_path / "out"
-    with distributed.LocalCluster(
-        n_workers=1,
-        threads_per_worker=1,
-        processes=False,
-        protocol="tcp://",
-        host="127.0.0.1",
-        dashboard_address=None,
-    ) as cluster:
+    with local_cluster(1) as cluster:
 
         def kill_every_worker_after_the_first_chunk():
             for _ in range(1200):  # at most 120 s: the first chunk is stored, then no worker is left
