@@ -10,22 +10,27 @@ clock is installed before etobs is imported, so the defaults ``clock=time.time``
 import sys
 import time
 
-_now = [float(sys.argv[1])]
-_sleep = time.sleep
+
+def _install(start: float) -> None:
+    """Replace ``time.time`` and ``time.sleep`` by the virtual clock starting at ``start``."""
+    now = [start]
+    sleep = time.sleep
+
+    def _time() -> float:
+        return now[0]
+
+    def _slept(seconds: float) -> None:
+        sleep(seconds)
+        now[0] += max(0.0, seconds)
+
+    time.time = _time
+    time.sleep = _slept
 
 
-def _time() -> float:
-    return _now[0]
+if __name__ == "__main__":
+    # Only as a program: pytest --doctest-modules imports this file, and the clock must
+    # not be installed in the test process itself.
+    _install(float(sys.argv[1]))
+    from etobs.cli.main import main  # after the clock is installed
 
-
-def _slept(seconds: float) -> None:
-    _sleep(seconds)
-    _now[0] += max(0.0, seconds)
-
-
-time.time = _time
-time.sleep = _slept
-
-from etobs.cli.main import main  # noqa: E402 - after the clock is installed
-
-sys.exit(main(sys.argv[2:]))
+    sys.exit(main(sys.argv[2:]))
