@@ -313,6 +313,17 @@ def test_rule_errors_at_run_time_name_the_entry_and_node(tmp_path):
     assert not list((tmp_path / "chunks").glob("*.json"))
 
 
+def test_an_observer_initial_state_of_the_wrong_size_is_refused_before_any_run(tmp_path):
+    # it was refused only when a worker began a chunk (runner.py), after the entries before it ran
+    states = {**SPEC["initial_states"], "z0": [0.0, 0.0, 0.0]}
+    spec = parse_compare_spec({**SPEC, "initial_states": states, "rules": SPEC["rules"][:2]})
+    ran = []
+    with pytest.raises(SpecError, match=r"^`initial_states.z0` has 3 entries but the observer has n_z = 2"):
+        compare(spec, tmp_path, executor="serial", on_entry=ran.append)
+    assert ran == [] and not list((tmp_path / "chunks").glob("*.json"))
+    parse_compare_spec({**SPEC, "initial_states": {**states, "z0": [0.5, 0.0]}}).check()
+
+
 def test_cli_bad_spec_exits_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["compare", str(tmp_path / "missing.toml")])

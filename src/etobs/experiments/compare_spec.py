@@ -197,13 +197,15 @@ class CompareSpec(Experiment):
     def problem(self, group: int) -> EstimationProblem:
         """The base problem with the entry's rule on every output node and its network."""
         rule, network = self.entries[group]
-        return rule.apply(self.base(), network.network)
+        problem = rule.apply(self.base(), network.network)
+        self.initial_states.check_z0(problem.observer.n_z)
+        return problem
 
     def check(self) -> None:
-        """Build every entry's problem, so a wrong parameter fails before any run."""
+        """Build every entry's problem, so a wrong parameter (or ``initial_states.z0``) fails before any run."""
         base = self.base()
         for rule, network in self.entries:
-            rule.apply(base, network.network)
+            self.initial_states.check_z0(rule.apply(base, network.network).observer.n_z)
 
     def resolved(self) -> dict[str, Any]:
         """The common settings, the factory's arguments, the rules and the networks."""

@@ -44,7 +44,6 @@ def run_task(kind: type[Experiment], raw_spec: dict[str, Any], task: Task) -> li
     """
     spec = kind.from_raw(raw_spec)
     problem = spec.problem(task.group)
-    spec.initial_states.check_z0(problem.observer.n_z)  # a comparison's problem() does not check it
     x0 = spec.initial_states.draw(max(task.runs) + 1)[list(task.runs)]
     start = time.perf_counter()
     res = simulate(
