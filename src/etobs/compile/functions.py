@@ -104,7 +104,7 @@ class CompiledFunction:
 
 
 #: Version of the cached wrappers' layout (part of the cache key).
-_FORMAT = 5
+_FORMAT = 6
 _MEMO: dict[str, CompiledFunction] = {}
 _MEMO_MODULES: dict[str, tuple[CompiledFunction, ...]] = {}
 _LOCK = threading.Lock()
@@ -160,6 +160,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
             KEY: key,
         }
         exec(compile(source, "<etobs wrapper>", "exec"), namespace)
+        _name_by_content(namespace["wrapper"], key)
         try:
             cf = _load_or_compile(namespace["wrapper"], cached, f"`{name}`")
         except Exception as exc:  # numba raises many types; all mean "cannot compile"
@@ -214,6 +215,7 @@ def compile_module(
         exec(compile(text, f"<etobs {what}>", "exec"), namespace)
         out = []
         for entry in entries:
+            _name_by_content(namespace[entry], key)
             try:
                 cf = _load_or_compile(namespace[entry], cached, f"{entry} of the {what}")
             except Exception as exc:  # numba raises many types; all mean "cannot compile"
@@ -299,6 +301,21 @@ def _cfunc(wrapper: Any, cached: bool, name: str) -> Any:
     return out
 
 
+def _name_by_content(fn: Any, key: str) -> None:
+    """Put a hash of ``key`` (a cache key, by content) in ``fn.__qualname__``, the name numba links by.
+
+    numba names a compiled function's symbol by module, qualified name, argument types
+    and a per-process counter, and links and looks up symbols by that name alone. Code
+    from the disk cache was named in another process: a lambda cached there and a
+    different lambda with the same argument types compiled here could get the same
+    symbol, and a model linked the wrong one's machine code, a silent wrong result
+    (``h = lambda x: 0.0 * x`` ran as the plant's ``lambda s: s * s``, and ``x' = x**2``
+    from ``x = 1`` completed instead of blowing up). With the content in the name, two
+    functions share a symbol only when they compile to the same code.
+    """
+    fn.__qualname__ = f"{fn.__qualname__}#{_hash_text(key)}"
+
+
 def _hash_text(text: str) -> str:
     import hashlib
 
@@ -339,6 +356,7 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     clone.__qualname__ = fn.__qualname__
     if cached:
         glb[KEY] = f"fn-{fingerprint(fn)}-{_FORMAT}-{numba.__version__}"
+        _name_by_content(clone, glb[KEY])
     out = numba.njit(error_model="numpy", cache=cached)(clone)
     memo[id(fn)] = out
     return out
@@ -385,7 +403,8 @@ def _cannot_compile(name: str, exc: Exception, origin: str = "") -> str:
 def _reason(exc: Exception) -> str:
     """Numba's reason in one line (with the call it could not type, when it names one)."""
     skip = ("Failed in nopython mode", "During:", "File ", "Traceback", "-", "^", "There are")
-    lines = [line.strip() for line in str(exc).splitlines()]
+    text = re.sub(r"#[0-9a-f]{16}", "", str(exc))  # the content hash in names (_name_by_content)
+    lines = [line.strip() for line in text.splitlines()]
     for k, text in enumerate(lines):
         if text and not text.startswith(skip):
             if text.endswith("signature:"):
