@@ -327,7 +327,7 @@ def test_a_new_model_reuses_the_cached_functions_it_shares_with_an_earlier_one(t
         return [f for f in files if part in f]
 
     first = run("send_on_delta(0.05)")
-    assert len(named(first["files"], "f_o-")) == 2  # one machine-code file and its index
+    assert len(named(first["files"], "f_o#")) == 2  # one machine-code file and its index
     again = run("send_on_delta(0.05)")
     assert again["files"] == first["files"]  # nothing compiled
     other = run(dynamic)  # another structure: a new model, the same user functions
@@ -338,7 +338,7 @@ def test_a_new_model_reuses_the_cached_functions_it_shares_with_an_earlier_one(t
     edited = run(dynamic, damping=0.7)  # the plant's closed-over matrix changed
     new = set(edited["files"]) - set(other["files"])
     assert any("estimation model" in f for f in new) and any("lambda" in f for f in new)
-    assert named(edited["files"], "f_o-") == named(first["files"], "f_o-")  # f_o loaded, never again
+    assert named(edited["files"], "f_o#") == named(first["files"], "f_o#")  # f_o loaded, never again
 
 
 def test_a_damaged_kernel_cache_entry_is_discarded_with_one_warning(tmp_path, monkeypatch):

@@ -101,6 +101,8 @@ def test_hostile_client_is_rejected_and_the_estimate_is_unharmed(tmp_path):
         "initial": 1,
         "applied": sum(ref.transmissions),
         "hello": 0,
+        "answer": 0,
+        "resent": 0,
     }
     assert c == expected and set(c) == set(VERDICTS)
     assert tuple(snap["transmissions"]) == ref.transmissions and snap["gaps"] == [0]

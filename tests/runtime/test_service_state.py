@@ -18,10 +18,10 @@ from hypothesis import strategies as st
 from etobs.errors import InputError
 from etobs.examples import robot_arm
 from etobs.runtime.marks import HighWaterMarks
-from etobs.runtime.packet import Packet, encode, node_keys
+from etobs.runtime.packet import Packet, decode, encode, node_keys, record_of, resync_record
 from etobs.runtime.sampled_rule import SampledRule
 from etobs.runtime.sensor import RESYNC_MIN_GAP, RESYNC_WINDOW, SensorNode, SequenceStore
-from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, RESYNC_TRIES, ObserverCore
+from etobs.runtime.service import MAX_SEQ_JUMP, REFUSED_IN_A_ROW, RESYNC_RETRY, RESYNC_TRIES, ObserverCore
 
 KEYS = node_keys(b"deployment secret", [0, 1])
 SESSION = 7.0
@@ -304,7 +304,7 @@ def test_hellos_need_fresh_numbers_and_a_start_packet_is_not_for_the_service():
     resync = encode(Packet(0, 7, 0.0, (0.0,), session=SESSION, resync=True), KEYS[0])
     assert core.receive(resync) == "malformed"  # a resync request is the service's too
     assert core.snapshot()["waiting"] == [0, 1]  # a hello is not a measurement
-    with pytest.raises(ValueError, match=r"at most one of initial, hello, start and resync"):
+    with pytest.raises(ValueError, match=r"at most one of initial, hello, start, resync and answer"):
         encode(Packet(0, 1, 0.0, (0.0,), initial=True, hello=True), KEYS[0])
 
 
@@ -346,12 +346,14 @@ def test_a_sensor_takes_only_the_answer_to_its_own_hello():
         handshake(Link([]), 0, KEYS[0], SequenceStore(), timeout=2, clock=lambda: next(ticks) * 0.25)
 
 
-def _cosim(pb, t, y, marks, *, down=None, listen=True):
+def _cosim(pb, t, y, marks, *, down=None, listen=True, sent_hook=None):
     """Sensors and service on one virtual clock; ``down = (t_kill, t_up)`` kills the service.
 
     While it is down the sensors' datagrams are lost; at ``t_up`` a new service is started on
-    the same state file, and its resync requests reach the sensors' inboxes. Returns the
-    estimate at each sample, the sensors and the last core.
+    the same state file, and its resync requests reach the sensors' inboxes. ``sent_hook``
+    may reorder or drop the datagrams of a sample. Returns the estimate and the status at
+    each sample, the sensors, the last core, the datagrams lost and the verdicts after the
+    restart (sample time, verdict, datagram).
     """
     inbox = {i: deque() for i in range(pb.n_nodes)}
     sent = []
@@ -366,7 +368,7 @@ def _cosim(pb, t, y, marks, *, down=None, listen=True):
         )
         for i, nd in enumerate(pb.nodes)
     ]
-    core, xhat, lost = _core(marks=HighWaterMarks(marks)), [], 0
+    core, xhat, status, lost, after = _core(marks=HighWaterMarks(marks)), [], [], [], []
     core.in_sync = in_sync = []  # whether the held outputs are the sensors' sent values, per sample
     for k, tk in enumerate(t):
         if down is not None and down[0] <= tk < down[1]:
@@ -377,14 +379,19 @@ def _cosim(pb, t, y, marks, *, down=None, listen=True):
             assert core.resumed
         for i, nd in enumerate(pb.nodes):
             nodes[i].sample(tk, y[k, list(nd.outputs)])
-        for d in sent:
+        for d in sent_hook(tk, sent) if sent_hook else sent:
             if core is None:
-                lost += 1
-            elif core.receive(d, now=tk) in ("initial", "applied"):
+                lost.append(d)
+                continue
+            verdict = core.receive(d, now=tk)
+            if down is not None and tk >= down[1]:
+                after.append((tk, verdict, d))
+            if verdict in ("initial", "applied", "answer"):
                 core.note_address(core.last_node, ("127.0.0.1", 47000 + core.last_node))
         sent.clear()
         if core is None:
             xhat.append(np.full(pb.plant.n_x, np.nan))
+            status.append("down")
             in_sync.append(False)
             continue
         core.advance(tk)
@@ -393,55 +400,129 @@ def _cosim(pb, t, y, marks, *, down=None, listen=True):
             assert addr == ("127.0.0.1", 47000 + i)
             inbox[i].append(d)
         xhat.append(core.xhat())
-    return np.array(xhat), nodes, core, lost
+        status.append(core.status)
+    return np.array(xhat), status, nodes, core, lost, after
 
 
-def test_a_restarted_service_asks_its_sensors_to_resynchronise(tmp_path):
+def _moving_then_resting(t):
+    # the outputs move while the service is down, then rest: no sensor's rule fires again
+    return np.stack([3.0 - i + 4.0 * np.clip(t - 5.5, 0.0, 1.0) * (1 - 2 * i) for i in range(2)], axis=1)
+
+
+def test_a_restarted_service_gets_back_what_its_sensors_sent_while_it_was_down(tmp_path):
     """SIGKILLed for 2.6 s, the service resumed from its checkpoint but the packets sent
     meanwhile were lost and no sensor resent: its held outputs stayed off the sensors' (the
-    estimate 8.1 off the reference at the end). Now the restarted service asks each sensor
-    for its current value; within one sampling period the held outputs are the sensors'
-    again, and the estimate comes back to the undisturbed run's."""
+    estimate 8.1 off the reference at the end; 2.35 with a resync that only asked for the
+    current value). Now the restarted service holds its observer and asks each sensor to
+    resend what it sent after the service's record; one sampling period after the restart
+    the observer has integrated them at their sample times, and its estimate is the
+    undisturbed run's."""
     pb, period = robot_arm(), 0.01
     t = period * np.arange(round(12.0 / period) + 1)
-    # the outputs move while the service is down, then rest: no sensor's rule fires again
-    y = np.stack([3.0 - i + 4.0 * np.clip(t - 5.5, 0.0, 1.0) * (1 - 2 * i) for i in range(2)], axis=1)
-    whole, _, _, _ = _cosim(pb, t, y, tmp_path / "a.state")
+    y = _moving_then_resting(t)
+    whole, _, whole_nodes, whole_core, _, _ = _cosim(pb, t, y, tmp_path / "a.state")
     down, up = (5.0, 7.6), round(7.6 / period)
     runs = {
         listen: _cosim(pb, t, y, tmp_path / f"{listen}.state", down=down, listen=listen)
         for listen in (False, True)
     }
-    # before: the sensors' 4 packets of the downtime lost, each sensor holding a value the
-    # service never got; 20 requests each (RESYNC_TRIES) unanswered, then no more
-    _, nodes, core, lost = runs[False]
-    assert lost == 4 and core.snapshot()["resync_asked"] == [RESYNC_TRIES] * 2
+    # without an answer: 4 packets of the downtime lost, each sensor holding a value the
+    # service never got; 20 requests each (RESYNC_TRIES) unanswered, then the observer goes on
+    xhat, status, nodes, core, lost, _ = runs[False]
+    assert len(lost) == 4 and core.snapshot()["resync_asked"] == [RESYNC_TRIES] * 2
+    assert core.snapshot()["resync_gave_up"] == [0, 1] and core.snapshot()["recovered"] == [0, 0]
+    held = up + RESYNC_TRIES * round(RESYNC_RETRY / period)  # the last request waits one retry
+    assert set(status[up:held]) == {"resyncing"} and status[held:] == ["ok"] * (len(t) - held)
     assert core.ybar.tolist() == [3.0, 2.0] and [n.sent for n in nodes] != [[3.0], [2.0]]
-    # now: one request each at t_up, answered at the next sample with the current value
-    _, nodes, core, lost = runs[True]
-    assert lost == 4 and core.snapshot()["resync_asked"] == [1, 1] and [n.resyncs for n in nodes] == [1, 1]
-    assert core.ybar.tolist() == [n.sent[0] for n in nodes] == y[-1].tolist() == [7.0, -2.0]
-    # the held outputs are the sensors' again one sampling period after the restart
+    # now: one request each at t_up; at the next sample each sensor resends exactly the
+    # packets that were lost, in order, then answers
+    xhat, status, nodes, core, lost, after = runs[True]
+    assert core.snapshot()["resync_asked"] == [1, 1] and [n.resyncs for n in nodes] == [1, 1]
+    resent = [(v, d) for tk, v, d in after if tk == t[up + 1]]
+    by_node = sorted(lost, key=lambda d: d[4:6])  # node by node, each in the order sent
+    assert [d for v, d in resent if v == "applied"] == by_node and len(lost) == 4
+    assert [v for v, _ in resent].count("answer") == 2 and [n.resent for n in nodes] == [2, 2]
+    snap = core.snapshot()
+    assert snap["recovered"] == [2, 2] and snap["gaps"] == [0, 0] and snap["resync_gave_up"] == []
+    assert snap["transmissions"] == whole_core.snapshot()["transmissions"]  # answers are not transmissions
+    assert [n.transmissions for n in nodes] == [n.transmissions for n in whole_nodes]
+    assert status[up] == "resyncing" and status[up + 1 :] == ["ok"] * (len(t) - up - 1)
+    assert core.ybar.tolist() == [n.sent[0] for n in nodes] == [n.sent[0] for n in whole_nodes]
     assert core.in_sync[up : up + 2] == [False, True] and all(core.in_sync[up + 1 :])
-    dev = {k: np.max(np.abs(run[0] - whole), axis=1) for k, run in runs.items()}
-    assert dev[True][up] == dev[False][up] > 1.0  # the same error accumulated while down
-    assert dev[True][-1] < dev[False][-1] / 4
+    # the estimate: held at the checkpoint's at t_up, the undisturbed run's one period later
+    gap = np.max(np.abs(xhat - whole), axis=1)
+    assert gap[up] > 1.0
+    assert np.all(gap[up + 1 :] <= 1e-9 * np.max(np.abs(whole[up + 1 :]), axis=1))
+
+
+def test_a_resend_overtaken_by_a_newer_packet_acts_at_its_own_time(tmp_path):
+    """The resends of a node may arrive after a newer packet of it (the network reorders, or
+    the node transmitted after the restart before it read the request): each is accepted
+    once, acts at its sample time, before the newer packet, and fills its gap; a second copy
+    during the resync is ``resent`` (the node answered twice), not counted as an attack."""
+
+    def pkt(node, seq, t, value, **kw):
+        return encode(Packet(node, seq, t, (value,), session=SESSION, **kw), KEYS[node])
+
+    def start(core):
+        for i in range(2):
+            assert core.receive(pkt(i, 1, 0.0, 1.0 + i, initial=True), now=0.0) == "initial"
+            core.note_address(i, ("127.0.0.1", 47000 + i))
+        assert core.receive(pkt(0, 2, 1.0, 1.5), now=1.0) == "applied"
+        core.advance(1.2)
+
+    later = [pkt(0, 3, 2.0, 2.5), pkt(0, 4, 2.5, 3.5), pkt(0, 5, 3.0, 4.5)]
+    whole = _core()
+    start(whole)
+    for d in later:
+        whole.receive(d, now=3.0)
+    whole.advance(3.5)
+
+    start(_core(marks=HighWaterMarks(tmp_path / "s.state")))  # killed at 1.2; 3, 4, 5 lost
+    core = _core(marks=HighWaterMarks(tmp_path / "s.state"))
+    assert core.resumed and core.holding and core.status == "resyncing"
+    asks = core.resync_requests(3.0)
+    assert [(i, addr) for i, addr, _ in asks] == [(0, ("127.0.0.1", 47000)), (1, ("127.0.0.1", 47001))]
+    assert [decode(d, KEYS).values for _, _, d in asks] == [(0.0, 2.0), (0.0, 1.0)]  # each node's record
+    # node 0 transmitted 5 before it read the request; then resends 3, 4 (and 4 again), answers
+    got = [core.receive(d, now=3.0) for d in (later[2], later[0], later[1], later[1])]
+    assert got == ["applied", "applied", "applied", "resent"]
+    assert core.snapshot()["gaps"] == [0, 0] and core.snapshot()["recovered"] == [2, 0]
+    assert core.receive(pkt(0, 6, 3.0, 4.5, answer=True), now=3.0) == "answer"
+    assert core.receive(pkt(1, 2, 0.0, 2.0, answer=True), now=3.0) == "answer"
+    assert not core.holding
+    assert core.snapshot()["transmissions"] == whole.snapshot()["transmissions"] == [4, 0]
+    core.advance(3.5)
+    assert core.ybar.tolist() == whole.ybar.tolist() == [4.5, 2.0]
+    assert np.max(np.abs(core.xhat() - whole.xhat())) <= 1e-12 * np.max(np.abs(whole.xhat()))
+    # after the resync, a copy of a resend is a replay again
+    assert core.receive(later[0], now=3.5) == "replayed"
 
 
 def test_a_resync_request_forged_replayed_or_flooded_is_refused():
     """A sensor answers only an authentic, fresh request of its session, at most once per
-    RESYNC_MIN_GAP: which requests were refused, by reason, counted."""
+    RESYNC_MIN_GAP: which requests were refused, by reason, counted. An answer resends what
+    the node sent above the request's record, as sent, and then says what it holds; it
+    never changes the rule's state."""
     inbox, sent = deque(), []
     rule = SampledRule(robot_arm().nodes[0].rule.sensor_spec(), 0.01)
     node = SensorNode(
         0, KEYS[0], rule, sent.append, session=SESSION, listen=lambda: inbox.popleft() if inbox else None
     )
+    twin_rule = SampledRule(robot_arm().nodes[0].rule.sensor_spec(), 0.01)
+    twin = SensorNode(0, KEYS[0], twin_rule, lambda d: None, session=SESSION)  # never asked
 
-    def ask(t, *, key=KEYS[0], node_id=0, session=SESSION, resync=True):
-        p = Packet(node_id, 12345, t, (0.0,), session=session, resync=resync, start=not resync)
+    def sample(t, y):
+        twin.sample(t, y)
+        return node.sample(t, y)
+
+    def ask(t, *, key=KEYS[0], node_id=0, session=SESSION, resync=True, record=(0.0, 1.0)):
+        p = Packet(node_id, 12345, t, record, session=session, resync=resync, start=not resync)
         return encode(p, key)
 
-    node.sample(0.0, [1.0])  # the initial value
+    sample(0.0, [1.0])  # the initial value, number 1
+    t_sent = next(0.01 * k for k in range(1, 50) if sample(0.01 * k, [40.0]) is not None)
+    assert len(sent) == 2 and node.transmissions == 1  # a transmission, number 2
     first = ask(1.0)
     inbox.extend(
         [
@@ -449,31 +530,49 @@ def test_a_resync_request_forged_replayed_or_flooded_is_refused():
             ask(1.0, node_id=1, key=KEYS[1]),  # another node's request (read with our key: forged)
             ask(1.0, resync=False),  # authentic, but a start packet, not a request
             ask(1.0, session=SESSION + 1),  # a request of another run
+            ask(1.0, record=(0.0,)),  # authentic, but no record: malformed
+            ask(1.0, record=(0.5, 1.0)),  # not an integer
             ask(1.0 + RESYNC_WINDOW + 0.01),  # just outside the window ahead
             ask(1.0 - RESYNC_WINDOW - 0.01),  # just outside the window behind
-            first,
-            first,  # the same request twice: a copy
         ]
     )
-    assert node.sample(1.0, [1.0]) is not None and node.resyncs == 1 and len(sent) == 2
+    assert sample(1.0, [40.0]) is None and node.resyncs == 0
+    inbox.extend([first, first])  # the same request twice: a copy
+    assert sample(1.01, [40.0]) is None and node.resyncs == 1 and node.transmissions == 1
     assert node.resync_refused == {
         "forged": 3,
         "wrong_session": 1,
+        "malformed": 2,
         "out_of_window": 2,
         "replayed": 1,
         "rate_limited": 0,
     }
+    # above record 1: number 2 resent byte for byte, then the answer: the value sent at t_sent
+    assert len(sent) == 4 and sent[2] == sent[1]
+    answer = decode(sent[3], KEYS)
+    assert answer.answer and answer.seq == 3 and (answer.t, answer.values) == (t_sent, (40.0,))
+    assert rule.eta == twin_rule.eta  # the rule went on as at any sample: no jump of eta
+    # a record of every packet sent: nothing to resend, only the answer
+    inbox.append(ask(1.6, record=(0.0, 2.0)))
+    sample(1.6, [40.0])
+    assert len(sent) == 5 and decode(sent[4], KEYS).answer and node.resent == 1
+    # a record beyond 2^32 is carried exactly
+    assert record_of(resync_record(2**40 + 5)) == 2**40 + 5
     # a flood of fresh requests: one answer per RESYNC_MIN_GAP, the rest counted
     answered = 0
     for k in range(1, 201):  # 2 s of samples, 8 requests each (MAX_READS), each newer
-        tk = 1.0 + 0.01 * k
+        tk = 1.6 + 0.01 * k
         inbox.extend(ask(tk - 0.001 * j) for j in range(8, 0, -1))
-        answered += node.sample(tk, [1.0]) is not None
-    assert answered == round(2.0 / RESYNC_MIN_GAP) == 4 and node.resyncs == 5  # at 1.5, 2.0, 2.5, 3.0
-    assert node.resync_refused["rate_limited"] == 200 * 8 - 4 and node.resync_refused["replayed"] == 1
+        before = node.resyncs
+        sample(tk, [40.0])
+        answered += node.resyncs - before
+    assert answered == round(2.0 / RESYNC_MIN_GAP) == 4 and node.resyncs == 6  # at 2.1, 2.6, 3.1, 3.6
+    assert node.resync_refused["rate_limited"] == 200 * 8 - 4 and node.transmissions == 1
     # the window's boundary is inside
-    inbox.extend([ask(3.6 + RESYNC_WINDOW)])
-    assert node.sample(3.6, [1.0]) is not None and node.resyncs == 6
+    inbox.extend([ask(4.2 + RESYNC_WINDOW)])
+    sample(4.2, [40.0])
+    assert node.resyncs == 7
+    assert (rule.eta, node.transmissions, node.sent) == (twin_rule.eta, twin.transmissions, twin.sent)
 
 
 def test_a_udp_sender_polls_without_waiting_after_a_handshake_read():

@@ -305,7 +305,7 @@ def run_sensor(args: argparse.Namespace) -> int:
             print(json.dumps({"node": args.node, "transmissions": sent}))
             return 130
     done = {"node": args.node, "samples": n, "transmissions": node.transmissions, "resyncs": node.resyncs}
-    print(json.dumps({**done, "resynced_at": node.resynced_at, "resync_refused": node.resync_refused}))
+    print(json.dumps({**done, "resent": node.resent, "resync_refused": node.resync_refused}))
     return 0
 
 

@@ -202,7 +202,7 @@ class CompareSpec(Experiment):
         return problem
 
     def check(self) -> None:
-        """Build every entry's problem, so a wrong parameter (or ``initial_states.z0``) fails before any run."""
+        """Build every entry's problem: a wrong parameter or `initial_states.z0` fails before any run."""
         base = self.base()
         for rule, network in self.entries:
             self.initial_states.check_z0(rule.apply(base, network.network).observer.n_z)

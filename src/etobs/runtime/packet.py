@@ -9,9 +9,13 @@ Version 2, big-endian, 32-byte header, then the values, then the tag::
                   transmission); bit 1 = hello (a sensor ready to start, asking for the
                   epoch); bit 2 = start (the service's answer to a hello: its sequence
                   number echoed, the session = the epoch, t = the first sample to take);
-                  bit 3 = resync (the service asking the node for a fresh transmission: a
-                  random nonce as the sequence number, the session, t = the service's time;
-                  see :mod:`etobs.runtime.sensor`)
+                  bit 3 = resync (the service asking the node to resend what it sent
+                  after the service's record: a random nonce as the sequence number, the
+                  session, t = the service's time, values = the record, the last
+                  sequence number of the node it holds, as (seq >> 32, seq & 0xffffffff));
+                  bit 4 = answer (the node's answer to a resync, sent after the packets it
+                  resent: the value it holds as sent and the time it sent it, not a
+                  transmission; see :mod:`etobs.runtime.sensor`)
     4       2     node id (uint16)
     6       2     number of values n (uint16, 1..64)
     8       8     sequence number (uint64, increasing per node, never reused)
@@ -47,7 +51,15 @@ FLAG_INITIAL = 0x01
 FLAG_HELLO = 0x02
 FLAG_START = 0x04
 FLAG_RESYNC = 0x08
-_FLAGS = {0: "", FLAG_INITIAL: "initial", FLAG_HELLO: "hello", FLAG_START: "start", FLAG_RESYNC: "resync"}
+FLAG_ANSWER = 0x10
+_FLAGS = {
+    0: "",
+    FLAG_INITIAL: "initial",
+    FLAG_HELLO: "hello",
+    FLAG_START: "start",
+    FLAG_RESYNC: "resync",
+    FLAG_ANSWER: "answer",
+}
 HEADER = struct.Struct(">2sBBHHQdd")
 #: The largest datagram the format allows (64 values).
 MAX_BYTES = HEADER.size + 8 * MAX_VALUES + TAG_BYTES
@@ -74,6 +86,19 @@ class Packet:
     hello: bool = False
     start: bool = False
     resync: bool = False
+    answer: bool = False
+
+
+def resync_record(seq: int) -> tuple[float, float]:
+    """The values of a resync request that carries the record ``seq`` (exact: two 32-bit halves)."""
+    return (float(seq >> 32), float(seq & 0xFFFFFFFF))
+
+
+def record_of(values: tuple[float, ...]) -> int | None:
+    """The record a resync request carries (:func:`resync_record`), or ``None`` if its values are not one."""
+    if len(values) != 2 or not all(v.is_integer() and 0 <= v < 2**32 for v in values):
+        return None
+    return int(values[0]) << 32 | int(values[1])
 
 
 def _tag(key: bytes, body: bytes) -> bytes:
@@ -92,9 +117,10 @@ def encode(packet: Packet, key: bytes) -> bytes:
         | FLAG_HELLO * packet.hello
         | FLAG_START * packet.start
         | FLAG_RESYNC * packet.resync
+        | FLAG_ANSWER * packet.answer
     )
     if flags not in _FLAGS:
-        raise ValueError("a packet is at most one of initial, hello, start and resync")
+        raise ValueError("a packet is at most one of initial, hello, start, resync and answer")
     body = HEADER.pack(MAGIC, VERSION, flags, packet.node, n, packet.seq, packet.t, packet.session)
     body += struct.pack(f">{n}d", *packet.values)
     return body + _tag(key, body)
@@ -130,6 +156,7 @@ def decode(data: bytes, keys: Mapping[int, bytes]) -> Packet:
         hello=bool(flags & FLAG_HELLO),
         start=bool(flags & FLAG_START),
         resync=bool(flags & FLAG_RESYNC),
+        answer=bool(flags & FLAG_ANSWER),
     )
 
 

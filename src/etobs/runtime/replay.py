@@ -19,7 +19,6 @@ from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.simulate import simulate
 from etobs.hybrid.options import SaveAt
-from etobs.runtime.packet import Packet, encode
 from etobs.runtime.sampled_rule import SampledRule
 from etobs.runtime.sensor import SensorNode
 from etobs.runtime.service import ObserverCore
@@ -58,33 +57,21 @@ def replay(
     *,
     z0: Any = None,
     dt: float = 1e-3,
-    resync_at: Mapping[int, Any] | None = None,
 ) -> Replay:
     """Run the nodes on the samples ``(t, y)`` and the observer on their packets, no network.
 
-    ``resync_at`` (node: sample times) asks those nodes for a resync at those samples, as
-    a restarted service did (:mod:`etobs.runtime.sensor`): the reference of a live run
-    whose sensors answered resync requests.
+    It is also the reference of a live run whose service was restarted: a resync
+    changes no node's rule state (:mod:`etobs.runtime.sensor`).
     """
     core = ObserverCore(problem, keys, z0=z0, t0=float(t[0]), dt=dt)
     inbox: list[bytes] = []
-    asks = {i: {round(float(s) / period) for s in times} for i, times in (resync_at or {}).items()}
-    requests: list[bytes] = []
     nodes = [
-        SensorNode(
-            i,
-            keys[i],
-            SampledRule(nd.rule.sensor_spec(), period),
-            inbox.append,
-            listen=lambda: requests.pop() if requests else None,
-        )
+        SensorNode(i, keys[i], SampledRule(nd.rule.sensor_spec(), period), inbox.append)
         for i, nd in enumerate(problem.nodes)
     ]
     xhat, packets = [], []
     for k, tk in enumerate(t):
         for i, (node, nd) in enumerate(zip(nodes, problem.nodes, strict=True)):
-            if k in asks.get(i, ()):
-                requests.append(encode(Packet(i, k, float(tk), (0.0,), resync=True), keys[i]))
             p = node.sample(float(tk), y[k, list(nd.outputs)])
             if p is not None and not p.initial:
                 packets.append((i, p.seq, float(tk)))

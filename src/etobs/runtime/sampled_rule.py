@@ -121,12 +121,10 @@ class SampledRule:
                 f"rule spec: `kind` must be dynamic, static, periodic or relative; got {self.kind!r}"
             )
 
-    def decide(self, e: Sequence[float], y: Sequence[float], *, force: bool = False) -> bool:
+    def decide(self, e: Sequence[float], y: Sequence[float]) -> bool:
         """Whether to send at this sample, given the gap ``e = ybar - y`` and ``y``.
 
-        Advances the rule's state over the period that follows. ``force`` (a resync the
-        service asked for) sends whatever the rule says, as a jump of the rule: the
-        dynamic rule's ``eta <- b eta`` (eq. (14)); a periodic rule keeps its schedule.
+        Advances the rule's state over the period that follows.
         """
         r = _norm(e)
         if self.kind == "periodic":
@@ -134,14 +132,12 @@ class SampledRule:
             fire = self.count >= self.every
             if fire:
                 self.count = 0
-            return fire or force
+            return fire
         if self.kind == "static":
-            return fm.static_trigger(_k(self.gamma, r), self.eps) >= 0.0 or force
+            return fm.static_trigger(_k(self.gamma, r), self.eps) >= 0.0
         if self.kind == "relative":
-            return fm.relative_trigger(r, _norm(y), self.rho, self.eps) >= 0.0 or force
-        fire = force or (
-            fm.dynamic_trigger(_k(self.gamma, r), _k(self.alpha, self.eta), self.sigma, self.eps) >= 0.0
-        )
+            return fm.relative_trigger(r, _norm(y), self.rho, self.eps) >= 0.0
+        fire = fm.dynamic_trigger(_k(self.gamma, r), _k(self.alpha, self.eta), self.sigma, self.eps) >= 0.0
         if fire:
             self.eta = fm.eta_reset(self.eta, self.b)  # eq. (14), jump
             r = 0.0

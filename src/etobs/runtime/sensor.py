@@ -17,13 +17,18 @@ blocks of them in a file before using them. Every packet carries the deployment'
 **Resync.** A service restarted mid-run resumes its observer from its checkpoint, but
 what the nodes sent while it was down is lost, and each node believes the observer holds
 its last value. The service then asks each node, at the address its packets came from,
-for a fresh transmission (:meth:`etobs.runtime.service.ObserverCore.resync_requests`). A
-node given ``listen`` reads such requests at each sample (at most ``MAX_READS``) and takes
-one only if it is authentic (its own key), of its session, stamped within
-``RESYNC_WINDOW`` of its own time and later than the last one it took, and at least
-``RESYNC_MIN_GAP`` after its last answer; it then transmits its current value as at any
-transmission of its rule: ``ybar <- y(t_k)``, ``eta <- b eta`` (eqs. (14)-(15)). What it
-refused is counted in ``resync_refused`` by reason.
+to resend what it sent after the service's record (the last sequence number of the node
+it holds; :meth:`etobs.runtime.service.ObserverCore.resync_requests`), and holds its
+observer until each has answered. A node given ``listen`` reads such requests at each
+sample (at most ``MAX_READS``) and takes one only if it is authentic (its own key), of
+its session, stamped within ``RESYNC_WINDOW`` of its own time, later than the last one
+it took, and at least ``RESYNC_MIN_GAP`` after its last answer. It then resends, as they
+were sent (same bytes), the packets of its log (the last ``RESEND_LOG``) numbered above
+the record, and an *answer*: the value it last sent and the time it sent it. The rule's
+state is not touched (no transmission is made), so the run goes on as if the service had
+never been down, and the restarted observer, integrating the resent packets at their
+sample times, gets the undisturbed estimate back. What it refused is counted in
+``resync_refused`` by reason.
 """
 
 from __future__ import annotations
@@ -32,12 +37,13 @@ import math
 import os
 import socket
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from etobs.errors import InputError
 from etobs.runtime.files import open_regular
-from etobs.runtime.packet import Packet, PacketError, decode, encode
+from etobs.runtime.packet import Packet, PacketError, decode, encode, record_of
 from etobs.runtime.sampled_rule import SampledRule
 
 #: How far ahead of the clock an epoch may lie: a start further away is a typing mistake,
@@ -58,6 +64,9 @@ RESYNC_WINDOW = 1.0
 RESYNC_MIN_GAP = 0.5
 #: Datagrams a node reads at most per sample (the rest wait, or the socket drops them).
 MAX_READS = 8
+#: Packets a node keeps to resend after a service's restart (about 100 kB at 8 values):
+#: a downtime in which it sent more loses the oldest, and the service counts them in ``gaps``.
+RESEND_LOG = 1024
 
 
 def check_epoch(epoch: float, duration: float, time_scale: float, now: float, name: str = "`epoch`") -> float:
@@ -158,12 +167,13 @@ class SensorNode:
     session : float
         The deployment's epoch, carried in every packet (the service refuses another).
     resyncs : int
-        Transmissions made because the service asked (module docstring), also counted in
-        ``transmissions``.
+        Resync requests answered (module docstring); not transmissions.
+    resent : int
+        Packets resent in those answers.
     resync_refused : dict of str to int
-        Resync requests refused: ``forged``, ``wrong_session``, ``out_of_window``
-        (stamped too far from the node's time), ``replayed`` (not later than the last one
-        taken), ``rate_limited``.
+        Resync requests refused: ``forged``, ``wrong_session``, ``malformed`` (authentic,
+        but its values are not a record), ``out_of_window`` (stamped too far from the
+        node's time), ``replayed`` (not later than the last one taken), ``rate_limited``.
 
     """
 
@@ -185,13 +195,14 @@ class SensorNode:
         self.transmissions = 0
         self._listen = listen
         self.resyncs = 0
+        self.resent = 0
         self.resync_refused = dict.fromkeys(
-            ("forged", "wrong_session", "out_of_window", "replayed", "rate_limited"), 0
+            ("forged", "wrong_session", "malformed", "out_of_window", "replayed", "rate_limited"), 0
         )
         self._resync_t = -math.inf  # the stamp of the last request taken
         self._answered = -math.inf  # node time of the last answer
-        #: The node times of the resync answers (at most one per RESYNC_MIN_GAP: bounded).
-        self.resynced_at: list[float] = []
+        self._sent_t = -math.inf  # the sample time of the value last sent
+        self._log: deque[tuple[int, bytes]] = deque(maxlen=RESEND_LOG)  # (seq, bytes) as sent
 
     def sample(self, t: float, y: Sequence[float]) -> Packet | None:
         """Take the sample ``y`` at time ``t``; return the packet sent, if any."""
@@ -200,21 +211,32 @@ class SensorNode:
         if self.sent is None:
             packet = Packet(self.node, self.seq.next(), t, tuple(y), initial=True, session=self.session)
             self._emit(packet, y)
-        asked = self._resync_asked(t)
+        record = self._resync_asked(t)
+        if record is not None:
+            self._answer(record)
         e = [s - v for s, v in zip(self.sent or y, y, strict=True)]
-        fired = self.rule.decide(e, y, force=asked)
-        if fired:
+        if self.rule.decide(e, y):
             packet = Packet(self.node, self.seq.next(), t, tuple(y), session=self.session)
             self._emit(packet, y)
             self.transmissions += 1
-            self.resyncs += asked
-            if asked:
-                self.resynced_at.append(t)
         return packet
 
-    def _resync_asked(self, t: float) -> bool:
-        """Whether a resync request taken now asks for a transmission at ``t`` (bounded reads)."""
-        taken = False
+    def _answer(self, record: int) -> None:
+        """Resend the packets numbered above ``record``, then the answer (module docstring)."""
+        again = [data for seq, data in self._log if seq > record]
+        for data in again:
+            self._send(data)
+        assert self.sent is not None  # the initial value is sent before any request is read
+        answer = Packet(
+            self.node, self.seq.next(), self._sent_t, tuple(self.sent), session=self.session, answer=True
+        )
+        self._send(encode(answer, self.key))
+        self.resyncs += 1
+        self.resent += len(again)
+
+    def _resync_asked(self, t: float) -> int | None:
+        """The record of a resync request taken at ``t``, if one is (bounded reads)."""
+        taken = None
         for _ in range(MAX_READS if self._listen is not None else 0):
             data = self._listen()
             if data is None:
@@ -224,23 +246,28 @@ class SensorNode:
             except PacketError:
                 self.resync_refused["forged"] += 1
                 continue
+            record = record_of(p.values)
             if not p.resync or p.node != self.node:
                 self.resync_refused["forged"] += 1  # authentic but not a request to this node
             elif p.session != self.session:
                 self.resync_refused["wrong_session"] += 1
+            elif record is None:
+                self.resync_refused["malformed"] += 1
             elif not abs(p.t - t) <= RESYNC_WINDOW:
                 self.resync_refused["out_of_window"] += 1
             elif p.t <= self._resync_t:
                 self.resync_refused["replayed"] += 1
-            elif taken or t - self._answered < RESYNC_MIN_GAP:
+            elif taken is not None or t - self._answered < RESYNC_MIN_GAP:
                 self.resync_refused["rate_limited"] += 1
             else:
-                self._resync_t, self._answered, taken = p.t, t, True
+                self._resync_t, self._answered, taken = p.t, t, record
         return taken
 
     def _emit(self, packet: Packet, y: list[float]) -> None:
-        self._send(encode(packet, self.key))
-        self.sent = y
+        data = encode(packet, self.key)
+        self._send(data)
+        self._log.append((packet.seq, data))
+        self.sent, self._sent_t = y, packet.t
 
 
 class UdpSender:

@@ -318,14 +318,16 @@ class ObserverServer:
                 target = min(self.now() - self.hold_back, t_end if done else t_end - self.hold_back)
                 if done and self.now() >= t_end:
                     target = t_end
-                while k * self.tick <= target:  # bounded: (target - last target) / tick lines
+                # a restarted observer waits for its nodes' resends (bounded: RESYNC_TRIES each);
+                # the trace has no line for a time the observer has not reached
+                while k * self.tick <= target and not self.core.holding:  # (target - last) / tick lines
                     self.core.advance(min(k * self.tick, t_end))
                     if fh is not None:
                         fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     k += 1
                 self.core.advance(target)
                 self._resync()
-                if target >= t_end:
+                if target >= t_end and not self.core.holding:
                     if fh is not None and (k - 1) * self.tick < t_end:  # the end is always a line
                         fh.write(to_json(self.core.snapshot()).encode() + b"\n")
                     break

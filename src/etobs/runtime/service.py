@@ -11,9 +11,11 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
 * ``wrong_size`` if it carries another number of values than the node has outputs;
 * ``out_of_range`` if a value is non-finite or larger than ``max_value`` in magnitude,
   or the sample time is non-finite or beyond ``MAX_TIME``;
-* ``replayed`` if its sequence number was already accepted (a copy);
+* ``replayed`` if its sequence number was already accepted (a copy); ``resent`` if it is
+  such a copy resent by its node in a resync (below);
 * ``stale`` if it is older than the last one accepted (overtaken, or a replay older than
-  the window of recent numbers or than a restart);
+  the window of recent numbers or than a restart), except a packet its node resends in a
+  resync: numbered above the record the service asked from and not seen since;
 * ``seq_jump`` if it is ``MAX_SEQ_JUMP`` or more above the last one accepted (a node
   never skips that many: accepting it would refuse the node's next packets as stale);
 * ``hello`` for a sensor's hello (any session: it asks the server for the epoch, see
@@ -22,7 +24,9 @@ with classical Runge--Kutta steps of at most ``dt`` between events. A packet is 
   back to the service is ``malformed``;
 * ``future`` if its sample time is more than ``max_lead`` ahead of the service clock
   (a wrong clock or epoch; accepting it would stall the observer);
-* otherwise accepted (``initial`` or ``applied``). It waits in a queue and is applied
+* otherwise accepted (``initial``, ``applied``, or ``answer`` for a node's answer to a
+  resync, which holds the value the node last sent from the time it sent it and is not
+  a transmission). It waits in a queue and is applied
   when the observer reaches its sample time, in time order across nodes (so it acts from
   when it was measured); one whose time the observer has passed is applied at the next
   :meth:`ObserverCore.advance` and counted in ``late``.
@@ -32,7 +36,8 @@ one of its node accepted before (the sensor's clock went back) is applied at tha
 time, after it, and counted in the node's ``clock_back``; an older measurement never
 overrides a newer one.
 
-``status`` is ``nonfinite`` (below), else ``refusing`` when some node's last
+``status`` is ``nonfinite`` (below), else ``resyncing`` while a restarted service holds
+its observer for its nodes' resends (below), else ``refusing`` when some node's last
 ``REFUSED_IN_A_ROW`` authentic packets or more were all refused as ``stale`` or
 ``wrong_session`` (its sequence file was reset, or it runs another epoch: the snapshot's
 ``refused`` names it), else ``waiting`` while some node has not been heard in this
@@ -43,11 +48,16 @@ When a packet is accepted, the high-water marks are written to their file
 acted on the estimate is refused after any restart. The observer state (``t``, ``z``, ``ybar``, the packets
 accepted but not yet applied) is written with them, and at least every
 ``CHECKPOINT_EVERY`` of service time: a service restarted on the same session resumes
-from it at once (integrating from the checkpoint's time reproduces the run it left).
-The checkpoint also keeps the address each node's packets came from: a resumed service
-asks each node it had heard for a fresh transmission (:meth:`ObserverCore.resync_requests`,
-the sensor's side in :mod:`etobs.runtime.sensor`), since what the nodes sent while it was
-down is lost and none resends. A resync packet sent to the service is ``malformed``.
+from it (integrating from the checkpoint's time reproduces the run it left). What the
+nodes sent while it was down is lost, so the checkpoint also keeps the address each
+node's packets came from, and a resumed service *resyncs*: it asks each node it had heard
+to resend what it sent after the service's record (:meth:`ObserverCore.resync_requests`,
+the sensor's side in :mod:`etobs.runtime.sensor`) and holds its observer at the
+checkpoint's time (``status`` ``resyncing``, :attr:`ObserverCore.holding`) until each has
+answered, or has been asked ``RESYNC_TRIES`` times in vain (then named in
+``resync_gave_up``). The resent packets are applied at their own sample times, so the
+observer then catches up to the estimate of the run that was never interrupted. A resync
+request sent to the service is ``malformed``.
 Every rejection is counted by kind; nothing raises. If the observer's state stops being
 finite (an unstable observer, a too-large ``dt``), it stays at its last finite value and
 ``status`` says ``nonfinite``. The asyncio transports
@@ -69,7 +79,7 @@ import numpy as np
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.runtime.marks import HighWaterMarks
-from etobs.runtime.packet import Packet, PacketError, decode, encode, key_id
+from etobs.runtime.packet import Packet, PacketError, decode, encode, key_id, resync_record
 
 VERDICTS = (
     "applied",
@@ -84,6 +94,8 @@ VERDICTS = (
     "forged",
     "wrong_size",
     "hello",
+    "answer",
+    "resent",
 )
 #: A node's sequence numbers never jump by more: a restart skips at most one reserved block
 #: (1024 by default), so 2^32 is four million restarts between two packets the service saw.
@@ -120,6 +132,12 @@ class NodeState:
     address: list[Any] | None = None  # [host, port] its packets came from (the reverse channel)
     resync_asked: int = 0  # resync requests sent since the restart
     resync_next: float = -math.inf  # service time of the next request, while it is owed one
+    record: int = 0  # the last sequence number on record at the restart: resends are above it
+    resync_seen: dict[int, float] = field(default_factory=dict)  # since the restart: seq -> time applied
+    recovered: int = 0  # packets accepted in the resync stamped before its first request
+    resync_since: float = math.inf  # service time of the first resync request
+    resync_answered: float | None = None  # service time its answer was accepted
+    resync_gave_up: bool = False  # asked RESYNC_TRIES times, never answered
 
 
 class ObserverCore:
@@ -240,7 +258,10 @@ class ObserverCore:
                     setattr(self.nodes[i], key, value)
         for i, addr in zip(sorted(self.nodes), cp.get("addresses", ()), strict=False):
             self.nodes[i].address = addr
-        self.resync_pending = set(cp["heard"])
+        # a node whose address is unknown cannot be asked: the observer does not wait for it
+        self.resync_pending = {i for i in cp["heard"] if self.nodes[i].address is not None}
+        for i in self.resync_pending:
+            self.nodes[i].record = self.nodes[i].last_seq
         for t_apply, node, seq, t, values, initial in cp["queue"]:
             p = Packet(node, seq, t, tuple(values), initial, self._session)
             heapq.heappush(self._queue, (t_apply, node, seq, p))
@@ -249,9 +270,11 @@ class ObserverCore:
 
     @property
     def status(self) -> str:
-        """``nonfinite``, ``refusing``, ``waiting`` or ``ok`` (see the module docstring)."""
+        """``nonfinite``, ``resyncing``, ``refusing``, ``waiting`` or ``ok`` (see the module docstring)."""
         if self.nonfinite:
             return "nonfinite"
+        if self.holding:
+            return "resyncing"
         if self.refused():
             return "refusing"
         return "waiting" if self.waiting() else "ok"
@@ -267,6 +290,11 @@ class ObserverCore:
             for i, nd in sorted(self.nodes.items())
             if nd.refused_in_a_row >= REFUSED_IN_A_ROW
         ]
+
+    @property
+    def holding(self) -> bool:
+        """Whether the observer waits at the checkpoint's time for its nodes' resends (a restart)."""
+        return bool(self.resync_pending)
 
     @property
     def ready(self) -> bool:
@@ -289,13 +317,16 @@ class ObserverCore:
         """Integrate the observer to time ``t``, applying the queued packets on the way.
 
         The high-water marks of every packet accepted so far are written first, so no
-        packet acts on the estimate before its sequence number is on record.
+        packet acts on the estimate before its sequence number is on record. While
+        :attr:`holding`, the observer stays where it is and the packets wait.
         """
         if not math.isfinite(t):
             raise InputError(f"`t` must be a finite time; got {t!r}")
         if self.t - self._saved_t >= CHECKPOINT_EVERY:
             self._dirty = True
         self.flush()
+        if self.holding:
+            return
         while self._queue and self._queue[0][0] <= t:
             tk, _, _, p = heapq.heappop(self._queue)
             if tk < self.t:  # arrived after the observer passed its time: acts from now
@@ -356,29 +387,44 @@ class ObserverCore:
             math.isfinite(p.t) and abs(p.t) <= MAX_TIME
         ):
             return self._count("out_of_range")
-        if p.seq in node.recent:
-            return self._count("replayed")
-        if p.seq <= node.last_seq:
+        resync = p.node in self.resync_pending
+        if p.seq in node.recent or p.seq in node.resync_seen:
+            return self._count("resent" if resync and p.seq > node.record else "replayed")
+        # a resend of the node's resync may arrive after a newer packet: it fills its gap
+        older = resync and node.record < p.seq < node.last_seq and not p.answer
+        if p.seq <= node.last_seq and not older:
             return self._refuse(node, "stale")
         if p.seq - node.last_seq >= MAX_SEQ_JUMP:  # a jump of MAX_SEQ_JUMP itself is refused
             return self._count("seq_jump")
         if now is not None and p.t > now + self.max_lead:
             return self._count("future")
-        if not p.initial and node.last_seq > 0:  # a restarted node skips numbers and says so
-            node.gaps += p.seq - node.last_seq - 1
-        node.last_seq = p.seq
+        if older:
+            node.gaps = max(0, node.gaps - 1)
+            # acts at its own time, before every newer packet of the node: never overrides one
+            t_apply = min([p.t, *(ta for seq, ta in node.resync_seen.items() if seq > p.seq)])
+        else:
+            if not p.initial and node.last_seq > 0:  # a restarted node skips numbers and says so
+                node.gaps += p.seq - node.last_seq - 1
+            node.last_seq = p.seq
+            if p.t < node.last_t:  # the sensor's clock went back: the newer number still wins
+                node.clock_back += 1
+            node.last_t = t_apply = max(node.last_t, p.t)
         node.recent.append(p.seq)
         node.heard, node.refused, node.refused_in_a_row = True, "", 0
         self._dirty = True
         self.last_node = p.node
-        self.resync_pending.discard(p.node)  # its current value, whatever was lost before
-        if not p.initial:
+        if resync:
+            node.resync_seen[p.seq] = t_apply
+            if p.answer:  # the node has resent what it had: the observer may go on
+                self.resync_pending.discard(p.node)
+                node.resync_answered = now
+                node.resync_seen.clear()
+            elif not p.initial and p.t < node.resync_since:  # sent while the service was down
+                node.recovered += 1
+        if not (p.initial or p.answer):
             node.transmissions += 1
-        if p.t < node.last_t:  # the sensor's clock went back: the newer number still wins
-            node.clock_back += 1
-        node.last_t = max(node.last_t, p.t)
-        heapq.heappush(self._queue, (node.last_t, p.node, p.seq, p))
-        verdict = self._count("initial" if p.initial else "applied")
+        heapq.heappush(self._queue, (t_apply, p.node, p.seq, p))
+        verdict = self._count("initial" if p.initial else "answer" if p.answer else "applied")
         # on record at once, in the checkpoint's queue: a service killed before its next
         # advance lost the packet (the sensor sends it once) and its estimate diverged
         self.flush()
@@ -411,18 +457,29 @@ class ObserverCore:
         """The resync requests due at service time ``now``: ``(node, address, datagram)``.
 
         A node heard before a restart is asked, every ``RESYNC_RETRY`` and at most
-        ``RESYNC_TRIES`` times, until a packet of it is accepted; each request carries the
-        session, ``now`` and a random nonce, authenticated with the node's key. The node
-        answers with a transmission of its current value (:mod:`etobs.runtime.sensor`).
+        ``RESYNC_TRIES`` times, until its answer is accepted; each request carries the
+        session, ``now``, a random nonce and the node's record (the last sequence number
+        of it the checkpoint had), authenticated with the node's key. The node resends
+        what it sent after the record, then answers (:mod:`etobs.runtime.sensor`). A node
+        not answered ``RESYNC_RETRY`` after its last request is given up
+        (``resync_gave_up``): the observer goes on without what it sent while down.
         """
         out = []
         for i in sorted(self.resync_pending):
             nd = self.nodes[i]
-            if nd.address is None or nd.resync_asked >= RESYNC_TRIES or now < nd.resync_next:
+            if now < nd.resync_next:
                 continue
+            if nd.resync_asked >= RESYNC_TRIES:
+                self.resync_pending.discard(i)
+                nd.resync_gave_up, nd.resync_seen = True, {}
+                continue
+            if nd.resync_asked == 0:
+                nd.resync_since = now
             nd.resync_asked += 1
             nd.resync_next = now + RESYNC_RETRY
-            p = Packet(i, secrets.randbits(63), now, (0.0,), session=self.session, resync=True)
+            p = Packet(
+                i, secrets.randbits(63), now, resync_record(nd.record), session=self.session, resync=True
+            )
             out.append((i, (nd.address[0], nd.address[1]), encode(p, self.keys[i])))
         return out
 
@@ -464,6 +521,10 @@ class ObserverCore:
             "late": self.late,
             "resumed": self.resumed,
             "resync_asked": [nd.resync_asked for nd in nodes],
+            "recovered": [nd.recovered for nd in nodes],
+            "resync_since": [_finite(nd.resync_since) for nd in nodes],
+            "resync_answered": [nd.resync_answered for nd in nodes],
+            "resync_gave_up": [i for i, nd in sorted(self.nodes.items()) if nd.resync_gave_up],
         }
 
     def checkpoint(self) -> dict[str, Any]:
