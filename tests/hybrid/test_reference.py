@@ -62,3 +62,18 @@ def test_a_nan_guard_is_the_states_failure_at_an_overflowed_state_and_the_guards
     with pytest.raises(ModelError, match="`guard` returned NaN"):
         reference._event_values(two, np.array([[1.0, 2.0], [np.inf, 0.0]]), 2)
     np.testing.assert_array_equal(reference._event_values(-np.ones((1, 2)), np.array([[np.inf, 0.0]]), 2), -1)
+
+
+@pytest.mark.parametrize("roots", [(1.0, 1.0001), (1.0001, 1.0), (1.3, 0.7, 1.0)])
+def test_a_bracket_holding_several_entries_is_located_at_the_earliest(roots):
+    # guards against: the later of several roots in one bracket taken. The solver's own
+    # brackets seldom hold two (its event stops at the earliest, the peak probes split
+    # excursions), so a planted "take the latest" passed every run-level test; here the
+    # bracket [0, 2] holds one entry per guard tau - r_k, on the dense output tau = t.
+    from etobs.hybrid.options import SolverOptions
+
+    run = object.__new__(reference._Run)  # only what locate reads
+    run.opts, run.t_end, run.on_dense = SolverOptions(event_xtol=1e-12), 10.0, {}
+    run.g1 = lambda t, x: x[0] - np.array(roots)
+    t_in = run.locate(lambda t: np.array([t]), 0.0, 2.0)
+    assert min(roots) <= t_in <= min(roots) + 1e-12  # in the jump set, within event_xtol
