@@ -60,7 +60,7 @@ MAX_BLOCK = 2**20
 #: node's own time, and later than the last one taken: an old one replayed is refused.
 RESYNC_WINDOW = 1.0
 #: Node seconds between two answers to resync requests, at least: however many arrive, a
-#: node makes at most one extra transmission per this time (a flood is counted, not obeyed).
+#: node answers (resends its log above the record) at most once per this time (a flood is counted).
 RESYNC_MIN_GAP = 0.5
 #: Datagrams a node reads at most per sample (the rest wait, or the socket drops them).
 MAX_READS = 8
