@@ -53,8 +53,14 @@ def execute(
     workers: int | None = None,
     scheduler: str | None = None,
     client: Any = None,
+    pool: ProcessPoolExecutor | None = None,
 ) -> None:
-    """Run ``tasks`` of the experiment ``kind.from_raw(raw_spec)``, reporting each as it finishes."""
+    """Run ``tasks`` of the experiment ``kind.from_raw(raw_spec)``, reporting each as it finishes.
+
+    ``pool`` (from :func:`process_pool`) serves the process executor across calls, so that
+    many small experiments (the trials of a tuning) do not each start workers that load
+    the compiled model again; without it each call starts its own pool.
+    """
     check_execution(executor, workers)
     if not tasks:
         return
@@ -62,7 +68,7 @@ def execute(
     if executor == "serial":
         _serial(tasks, job, on_done, on_error)
     elif executor == "process":
-        _process(tasks, job, on_done, on_error, workers)
+        _process(tasks, job, on_done, on_error, workers, pool)
     else:
         _dask(tasks, job, on_done, on_error, scheduler, client)
 
@@ -97,10 +103,48 @@ def _serial(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed) ->
             on_done(task, records)
 
 
-def _process(tasks: Sequence[Task], job: Job, on_done: Done, on_error: Failed, workers: int | None) -> None:
-    # "spawn" starts clean workers: safe with threads, the same on every platform.
-    ctx = multiprocessing.get_context("spawn")
-    lost = _pool_round(list(tasks), job, on_done, on_error, workers, ctx)
+def process_pool(workers: int | None) -> ProcessPoolExecutor:
+    """A pool of worker processes to pass to :func:`execute` for many calls (close it after)."""
+    check_execution("process", workers)
+    return ProcessPoolExecutor(
+        max_workers=workers, mp_context=_SPAWN, initializer=_worker_init, initargs=(os.getpid(),)
+    )
+
+
+def usable_pool(pool: ProcessPoolExecutor, workers: int | None) -> ProcessPoolExecutor:
+    """``pool``, or a new one in its place when a worker's death broke it (the old one is shut down)."""
+    try:
+        pool.submit(int).result()
+    except BrokenProcessPool:
+        pool.shutdown(wait=False, cancel_futures=True)
+        return process_pool(workers)
+    return pool
+
+
+#: "spawn" starts clean workers: safe with threads, the same on every platform.
+_SPAWN = multiprocessing.get_context("spawn")
+
+
+def _process(
+    tasks: Sequence[Task],
+    job: Job,
+    on_done: Done,
+    on_error: Failed,
+    workers: int | None,
+    pool: ProcessPoolExecutor | None = None,
+) -> None:
+    ctx = _SPAWN
+    if pool is None:
+        lost = _pool_round(list(tasks), job, on_done, on_error, workers, ctx)
+    else:
+        futures: dict[Any, Task] = {}
+        try:
+            for t in tasks:
+                futures[pool.submit(run_task, *job, t)] = t
+        except BrokenProcessPool:  # a worker died: every chunk goes the lost chunks' way below
+            lost = list(tasks)
+        else:
+            lost = _collect(futures, on_done, on_error)
     # A dead worker breaks the whole pool and every pending chunk with it. Rerun those
     # chunks one at a time, so only a chunk that itself kills its worker is blamed.
     for task in lost:
@@ -135,21 +179,25 @@ def _pool_round(
     tasks: list[Task], job: Job, on_done: Done, on_error: Failed, workers: int | None, ctx: Any
 ) -> list[Task]:
     """Run ``tasks`` on a fresh pool; return those lost because a worker died."""
-    lost: list[Task] = []
     with ProcessPoolExecutor(
         max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),)
     ) as pool:
-        futures = {pool.submit(run_task, *job, t): t for t in tasks}
-        for fut in as_completed(futures):
-            task = futures[fut]
-            try:
-                records = fut.result()
-            except BrokenProcessPool:
-                lost.append(task)
-            except Exception:
-                on_error(task, traceback.format_exc())
-            else:
-                on_done(task, records)
+        return _collect({pool.submit(run_task, *job, t): t for t in tasks}, on_done, on_error)
+
+
+def _collect(futures: dict[Any, Task], on_done: Done, on_error: Failed) -> list[Task]:
+    """Report each finished future; return the tasks lost because a worker died (the pool is broken)."""
+    lost: list[Task] = []
+    for fut in as_completed(futures):
+        task = futures[fut]
+        try:
+            records = fut.result()
+        except BrokenProcessPool:
+            lost.append(task)
+        except Exception:
+            on_error(task, traceback.format_exc())
+        else:
+            on_done(task, records)
     return lost
 
 

@@ -1,0 +1,182 @@
+"""One candidate of a tuning: its certificate (the hard constraints) and its simulated figures.
+
+The certificate is the one ``etobs check`` gives (:mod:`etobs.experiments.check_spec`), so
+a check spec exported for a candidate certifies it with the same numbers; the
+simulation is a sweep on the shared pipeline (:func:`etobs.experiments.pipeline.run_groups`)
+into one chunk store, so a candidate's runs are never computed twice (a resumed tuning,
+a pruned candidate's first runs, the same candidate twice).
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from etobs.errors import InputError
+from etobs.examples.registry import make_problem, resolve_factory
+from etobs.experiments.check_spec import certify_with, observer_gains, rate_bound
+from etobs.experiments.pipeline import run_groups
+from etobs.experiments.spec import parse_spec
+from etobs.experiments.store import ResultStore, task_key
+from etobs.tuning.spec import TuneSpec
+
+#: Status of a run that reached its horizon (every other status stops a run early).
+COMPLETED = "completed"
+
+
+@dataclass(frozen=True)
+class CertificateFigures:
+    """What the certificate says of a candidate, and the constraints it gives (``<= 0``: met)."""
+
+    ok: bool
+    failures: str
+    nu: float
+    mu: float
+    error_bound: float
+    tau: tuple[float, ...]
+    constraints: dict[str, float]
+
+
+@dataclass(frozen=True)
+class SimulatedFigures:
+    """A candidate's figures over its runs.
+
+    ``transmissions_rate`` is the mean number of transmissions per node and second (the
+    first objective), ``error`` the error statistic (the second: the mean of the per-run
+    ``max |x - xhat|`` on the error window, or its quantile); ``transmissions_mean`` and
+    ``error_mean`` are the per-run means as ``etobs sweep`` aggregates them.
+    """
+
+    runs: int
+    completed: int
+    transmissions_rate: float
+    error: float
+    transmissions_mean: float
+    error_mean: float
+
+
+class Evaluator:
+    """Certifies and simulates the candidates of ``spec``, storing runs in ``store``."""
+
+    def __init__(self, spec: TuneSpec, store: ResultStore, execution: dict[str, Any]) -> None:
+        self.spec = spec
+        self.store = store
+        self.execution = execution
+        start = make_problem(spec.factory, spec.fixed, "system.fixed")
+        self.n_nodes = len(start.nodes)
+        self.takes_L = "L" in inspect.signature(resolve_factory(spec.factory)).parameters
+        # the ISS gains of each observer, computed once (an LMI design is a convex program)
+        self.gains: dict[str, tuple[Any, list[list[float]], list[str]]] = {}
+        for name, table in spec.observers.items():
+            iss, L, notes = observer_gains(table, start)
+            self.gains[name] = (iss, np.asarray(L).tolist(), notes)
+        first = next(iter(self.gains), None)
+        problem = start if first is None else self._problem({}, first)
+        # E depends on the plant alone: estimated (or read) once, for every candidate
+        self.E = rate_bound(problem, spec.guarantees)
+
+    def sim_kwargs(self, kwargs: dict[str, Any], observer: str | None) -> dict[str, Any]:
+        """The factory's arguments a candidate is simulated with (its observer's ``L`` added)."""
+        if observer is None or not self.takes_L:
+            return dict(kwargs)
+        return {**kwargs, "L": self.gains[observer][1]}
+
+    def _problem(self, kwargs: dict[str, Any], observer: str | None) -> Any:
+        return make_problem(
+            self.spec.factory, {**self.spec.fixed, **self.sim_kwargs(kwargs, observer)}, "parameters"
+        )
+
+    def certify(self, kwargs: dict[str, Any], observer: str | None) -> CertificateFigures:
+        """The candidate's certificate, and its constraints ``certificate``, ``tau_min``, ``budget``.
+
+        A candidate the theorems do not cover (``certify`` refuses its problem) fails the
+        ``certificate`` constraint, with the reason in ``failures``.
+        """
+        spec = self.spec
+        iss = None if observer is None else self.gains[observer][0]
+        try:
+            cert = certify_with(self._problem(kwargs, observer), iss, spec.guarantees, E=self.E)
+        except InputError as exc:  # not covered by the theorems: never certified
+            cons = {"certificate": 1.0}
+            if spec.tau_min is not None:
+                cons["tau_min"] = 1.0
+            if spec.budget.kind == "certified":
+                cons["budget"] = 1.0
+            return CertificateFigures(False, f"not covered: {exc}", math.nan, math.nan, math.nan, (), cons)
+        fails = cert.failures()
+        cons = {"certificate": float(len(fails))}
+        taus = tuple(nd.tau for nd in cert.nodes)
+        if spec.tau_min is not None:
+            need = spec.tau_min if isinstance(spec.tau_min, tuple) else (spec.tau_min,) * len(taus)
+            if len(need) != len(taus):
+                raise InputError(
+                    f"`constraints.tau_min` has {len(need)} values; the problem has {len(taus)} nodes"
+                )
+            cons["tau_min"] = max(_short(t, m) for t, m in zip(taus, need, strict=True))
+        if spec.budget.kind == "certified":
+            bound = cert.error_bound
+            cons["budget"] = (bound - spec.budget.error) / spec.budget.error if math.isfinite(bound) else 1.0
+        text = "; ".join(f"{c.name}{'' if c.node is None else f' [node {c.node}]'}" for c in fails)
+        return CertificateFigures(cert.ok, text, cert.nu, cert.mu, cert.error_bound, taus, cons)
+
+    def simulate(
+        self, candidates: list[tuple[dict[str, Any], str | None]], runs: int, seed: int | None = None
+    ) -> list[list[dict[str, Any]] | None]:
+        """The records of runs ``0 .. runs - 1`` of each candidate (``None``: a chunk failed).
+
+        The candidates are one sweep (one row each) on the tuning's executor; runs already
+        in the store are read back, not computed again.
+        """
+        rows = [self.sim_kwargs(kw, obs) for kw, obs in candidates]
+        sweep = parse_spec(self.spec.sweep_raw(rows, runs=runs, seed=seed))
+        run_groups(sweep, self.store, progress=False, **self.execution)
+        out: list[list[dict[str, Any]] | None] = []
+        for g in range(sweep.n_groups):
+            recs = self.store.records(task_key(sweep, g), runs)
+            out.append([recs[k] for k in range(runs)] if len(recs) == runs else None)
+        return out
+
+    def figures(self, records: list[dict[str, Any]]) -> SimulatedFigures:
+        """The objectives of a candidate from its runs' records (as ``run_task`` writes them)."""
+        counts = [sum(r["transmissions"]) for r in records]
+        nodes = len(records[0]["transmissions"])
+        errors = [r["error"] for r in records if r["error"] is not None]
+        completed = sum(r["status"] == COMPLETED for r in records)
+        if errors:
+            stat = (
+                float(np.mean(errors))
+                if self.spec.quantile is None
+                else float(np.quantile(errors, self.spec.quantile))
+            )
+            mean = float(np.mean(errors))
+        else:
+            stat = mean = math.inf
+        return SimulatedFigures(
+            runs=len(records),
+            completed=completed,
+            transmissions_rate=float(np.mean(counts)) / (nodes * self.spec.window)
+            if self.spec.window > 0
+            else math.inf,
+            error=stat,
+            transmissions_mean=float(np.mean(counts)),
+            error_mean=mean,
+        )
+
+    def budget_constraint(self, fig: SimulatedFigures) -> dict[str, float]:
+        """The simulated constraints: every run completed, and (simulated budget) the error within it."""
+        cons = {"completed": (fig.runs - fig.completed) / fig.runs}
+        if self.spec.budget.kind == "simulated":
+            b = self.spec.budget.error
+            cons["budget"] = (fig.error - b) / b if math.isfinite(fig.error) else 1.0
+        return cons
+
+
+def _short(tau: float, need: float) -> float:
+    """How far ``tau`` falls short of ``need``, relative (``<= 0``: met; an unknown ``tau`` fails)."""
+    if not math.isfinite(tau):
+        return 1.0
+    return (need - tau) / need if need > 0 else -tau

@@ -1,0 +1,355 @@
+"""``tune``: the fewest transmissions for an accuracy budget, with the paper's guarantees holding.
+
+The search is Optuna's multi-objective TPE sampler (objectives: transmissions per node
+and second, simulated error; constraints: the certificate, ``tau_min``, the budget),
+its study stored in SQLite in the output folder (or any database URL), so that a
+killed tuning resumes with no trial lost or computed twice. Trials are asked in
+batches of ``search.batch``, evaluated together on the experiment executors, then told;
+a new sampler seeded by ``(search.seed, trial number)`` asks each trial, so a resumed
+tuning asks what an uninterrupted one would, and both end with the same front.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import socket
+import warnings
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+from etobs._progress import progress_bar
+from etobs.errors import InputError
+from etobs.experiments.executors import check_execution, process_pool, usable_pool
+from etobs.experiments.store import ResultStore, atomic_write
+from etobs.tuning.evaluate import Evaluator
+from etobs.tuning.front import dominates, pareto
+from etobs.tuning.result import TrialRow, TuningResult, finish
+from etobs.tuning.space import distributions, factory_kwargs, observer_of, start_values
+from etobs.tuning.spec import TuneSpec, load_tune_spec
+
+#: Directions of the two objectives: transmissions per node and second, error.
+DIRECTIONS = ("minimize", "minimize")
+
+
+def tune(
+    spec: TuneSpec | str | Path,
+    out: str | Path,
+    *,
+    trials: int | None = None,
+    executor: str = "process",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    storage: str | None = None,
+    progress: bool | None = None,
+    on_trial: Callable[[TrialRow], None] | None = None,
+) -> TuningResult:
+    """Search the triggering parameters of ``spec`` for the fewest transmissions within the budget.
+
+    Parameters
+    ----------
+    spec : TuneSpec or path
+        A tuning spec (:func:`~etobs.tuning.spec.load_tune_spec`; keys in docs/specs.md).
+    out : path
+        Output folder: the study (``study.db``), the runs (``runs/``), the tables
+        (``trials``, ``front``), the front's check and sweep specs (``specs/``), the plot.
+        Rerun with the same folder to resume.
+    trials : int, optional
+        Trials in all (default ``search.trials``); a rerun with more continues the study.
+    executor, workers, scheduler, client
+        Where the runs are simulated, as in :func:`~etobs.experiments.sweep.run_sweep`.
+    storage : str, optional
+        An Optuna storage URL (``postgresql://...``) shared by several machines, each with
+        its own ``out``; default ``sqlite:///OUT/study.db``.
+    progress : bool, optional
+        A bar over the trials with the best point so far (default: on a terminal).
+    on_trial : callable, optional
+        Called with each trial's row as it is told.
+
+    Returns
+    -------
+    TuningResult
+        The trials, the front (validated on held-out runs) and where the outputs are.
+
+    """
+    if not isinstance(spec, TuneSpec):
+        spec = load_tune_spec(spec)
+    total = spec.search.trials if trials is None else trials
+    if isinstance(total, bool) or not isinstance(total, int) or total < 1:
+        raise InputError(f"`trials` must be a positive integer; got {trials!r}")
+    check_execution(executor, workers)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = ResultStore(out / "runs")
+    with store.lock(), _execution(executor, workers, scheduler, client) as execution:
+        store.clean_temporary()
+        atomic_write(out / "spec.json", json.dumps(spec.raw, indent=2, sort_keys=True, default=repr) + "\n")
+        ev = Evaluator(spec, store, execution)
+        study = _study(spec, out, storage, ev)
+        worker = f"{socket.gethostname()}:{out.resolve()}"
+        loop = _Loop(spec, ev, study, worker, on_trial)
+        loop.run(total, progress)
+        return finish(spec, ev, study, out)
+
+
+@contextlib.contextmanager
+def _execution(
+    executor: str, workers: int | None, scheduler: str | None, client: Any
+) -> Iterator[dict[str, Any]]:
+    """The executor settings for every batch, with one process pool or Dask client for all of them."""
+    if executor == "process":
+        holder = {"pool": process_pool(workers)}
+        try:
+            yield {"executor": "process", "workers": workers, "pool": _PoolRef(holder, workers)}
+        finally:
+            holder["pool"].shutdown(wait=True, cancel_futures=True)
+    elif executor == "dask" and client is None and scheduler:
+        from dask.distributed import Client
+
+        try:
+            own = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from exc
+        try:
+            yield {"executor": "dask", "client": own}
+        finally:
+            own.close()
+    else:
+        yield {"executor": executor, "workers": workers, "scheduler": scheduler, "client": client}
+
+
+class _PoolRef:
+    """The tuning's process pool, replaced when a worker's death broke it (``usable_pool``)."""
+
+    def __init__(self, holder: dict[str, Any], workers: int | None) -> None:
+        self.holder, self.workers = holder, workers
+
+    def __getattr__(self, name: str) -> Any:
+        self.holder["pool"] = usable_pool(self.holder["pool"], self.workers)
+        return getattr(self.holder["pool"], name)
+
+
+def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any:
+    """The Optuna study of ``spec`` (created, or loaded to resume); refused if it holds another tuning."""
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    url = storage or f"sqlite:///{(out / 'study.db').resolve()}"
+    try:
+        study = optuna.create_study(
+            study_name=spec.name, storage=url, directions=list(DIRECTIONS), load_if_exists=True
+        )
+    except (ValueError, ImportError) as exc:  # a malformed URL, a database driver not installed
+        raise InputError(f"`storage` {url!r} cannot hold the study: {exc}") from exc
+    ident = _identity(spec, ev)
+    had = study.user_attrs.get("etobs_tuning")
+    if had is None:
+        study.set_user_attr("etobs_tuning", ident)
+        start = start_values(spec, ev.n_nodes)
+        if start is not None:  # the start design is trial 0: its figures are on the plot and in the tables
+            study.enqueue_trial(start, user_attrs={"start": True})
+    elif had != ident:
+        raise InputError(
+            f"the study {spec.name!r} in {url!r} holds the trials of another tuning (other parameters, runs, "
+            "budget or seed); use another output folder or `name`"
+        )
+    return study
+
+
+def _identity(spec: TuneSpec, ev: Evaluator) -> str:
+    """A hash of what determines every trial's numbers (all but the number of trials)."""
+    raw = {k: v for k, v in spec.raw.items() if k not in ("search", "validation", "references")}
+    raw["search"] = {k: v for k, v in spec.raw.get("search", {}).items() if k != "trials"}
+    return hashlib.sha256(json.dumps(raw, sort_keys=True, default=repr).encode()).hexdigest()[:20]
+
+
+class _Loop:
+    """Ask a batch, certify, simulate (pruning the clearly dominated), tell; until ``total`` trials."""
+
+    def __init__(self, spec: TuneSpec, ev: Evaluator, study: Any, worker: str, on_trial: Any) -> None:
+        self.spec, self.ev, self.study, self.worker, self.on_trial = spec, ev, study, worker, on_trial
+        self.dists = distributions(spec, ev.n_nodes)
+        self.names = [
+            "certificate",
+            *(["tau_min"] if spec.tau_min is not None else []),
+            "budget",
+            "completed",
+        ]
+
+    def _saved(self, runs: int) -> None:
+        """Count runs not simulated (screened, or the rest of a pruned candidate), in the study."""
+        self.study.set_user_attr("saved_runs", int(self.study.user_attrs.get("saved_runs", 0)) + runs)
+
+    def run(self, total: int, progress: bool | None) -> None:
+        from optuna.trial import TrialState
+
+        done = lambda: [t for t in self.study.get_trials(deepcopy=False) if t.state.is_finished()]  # noqa: E731
+        bar = progress_bar(
+            total, f"tune {self.spec.name}", enabled=progress, unit="trial", initial=min(len(done()), total)
+        )
+        try:
+            while True:
+                trials = self.study.get_trials(deepcopy=False)
+                mine = [
+                    t
+                    for t in trials
+                    if t.state == TrialState.RUNNING and t.user_attrs.get("worker") == self.worker
+                ]
+                batch = [t.number for t in mine]
+                # the next trial's number (a waiting trial, the enqueued start design, has one already)
+                count = sum(t.state != TrialState.WAITING for t in trials)
+                while count < total and (not batch or count % self.spec.search.batch != 0):
+                    batch.append(self._ask(count))
+                    count += 1
+                if not batch:
+                    break
+                told = self._evaluate(sorted(batch))
+                bar.update(told)
+                best = self._best()
+                if best:
+                    bar.set_postfix_str(best, refresh=False)
+        finally:
+            bar.close()
+
+    def _ask(self, number: int) -> int:
+        import optuna
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            self.study.sampler = optuna.samplers.TPESampler(
+                seed=_seed(self.spec.search.seed, number),
+                n_startup_trials=self.spec.search.startup,
+                multivariate=True,
+                constant_liar=True,
+            )
+            trial = self.study.ask(self.dists)
+        trial.set_user_attr("worker", self.worker)
+        return trial.number
+
+    def _evaluate(self, numbers: list[int]) -> int:
+        import optuna
+        from optuna.trial import TrialState
+
+        spec, ev = self.spec, self.ev
+        frozen = {t.number: t for t in self.study.get_trials(deepcopy=False) if t.number in set(numbers)}
+        cands = []
+        for n in numbers:
+            values = frozen[n].params
+            obs = observer_of(spec, values)
+            kwargs = factory_kwargs(spec, values, ev.n_nodes)
+            cands.append((n, kwargs, obs, ev.certify(kwargs, obs)))
+        live = [
+            c for c in cands if not (spec.search.screen and any(x > 0 for x in c[3].constraints.values()))
+        ]
+        front = self._front()
+        pruned: dict[int, Any] = {}
+        first = math.ceil(spec.search.prune_share * spec.runs)
+        if spec.search.prune_share > 0 and 0 < first < spec.runs and live:
+            recs = ev.simulate([(c[1], c[2]) for c in live], first)
+            for c, r in zip(live, recs, strict=True):
+                if r is None:
+                    continue
+                fig = ev.figures(r)
+                over = spec.budget.kind == "simulated" and fig.error > spec.budget.error * (
+                    1 + spec.search.prune_margin
+                )
+                beaten = any(
+                    dominates(p, (fig.transmissions_rate, fig.error), spec.search.prune_margin) for p in front
+                )
+                if over or beaten:
+                    pruned[c[0]] = fig
+        full = [c for c in live if c[0] not in pruned]
+        recs = ev.simulate([(c[1], c[2]) for c in full], spec.runs) if full else []
+        sims = dict(zip([c[0] for c in full], recs, strict=True))
+        for n, kwargs, obs, cert in cands:
+            trial = optuna.trial.Trial(self.study, frozen[n]._trial_id)
+            attrs: dict[str, Any] = {
+                "kwargs": kwargs,
+                "observer": obs,
+                "cert_ok": cert.ok,
+                "cert_failures": cert.failures,
+                "nu": _num(cert.nu),
+                "mu": _num(cert.mu),
+                "error_bound": _num(cert.error_bound),
+                "tau": [_num(t) for t in cert.tau],
+            }
+            cons = dict(cert.constraints)
+            if n in pruned:
+                fig = pruned[n]
+                attrs.update(_fig_attrs(fig), simulated="pruned")
+                self._saved(spec.runs - first)
+                state, values = TrialState.PRUNED, None
+            elif n in sims and sims[n] is not None:
+                fig = ev.figures(sims[n])
+                cons.update(ev.budget_constraint(fig))
+                attrs.update(_fig_attrs(fig), simulated="full")
+                state, values = TrialState.COMPLETE, [fig.transmissions_rate, fig.error]
+            elif n in sims:  # a chunk failed: its message is in the store's .error.json
+                attrs["simulated"] = "failed"
+                state, values = TrialState.FAIL, None
+            else:  # screened out: the certificate rules it out whatever it simulates
+                self._saved(spec.runs)
+                attrs["simulated"] = "screened"
+                state, values = TrialState.COMPLETE, [math.inf, math.inf]
+            # every trial carries the same constraints; one not evaluated counts as not met
+            for k in self.names:
+                cons.setdefault(k, 1.0)
+            for k, x in attrs.items():
+                trial.set_user_attr(k, x)
+            for k, x in cons.items():
+                trial.set_constraint(k, float(x))
+            self.study.tell(n, values, state=state)
+            if self.on_trial is not None:
+                self.on_trial(TrialRow.of(self.study.trials[n], spec, ev.n_nodes))
+        return len(cands)
+
+    def _front(self) -> list[tuple[float, float]]:
+        pts = [tuple(t.values) for t in self.study.get_trials(deepcopy=False) if _feasible(t)]
+        return [pts[i] for i in pareto(pts)]
+
+    def _best(self) -> str:
+        pts = [
+            (t.values[0], t.values[1], t.number)
+            for t in self.study.get_trials(deepcopy=False)
+            if _feasible(t)
+        ]
+        if not pts:
+            return "no feasible point yet"
+        tx, err, n = min(pts)
+        return f"best: {tx:.4g} tx/node/s at error {err:.4g} (trial {n})"
+
+
+def _feasible(t: Any) -> bool:
+    """A completed, fully simulated trial that meets every constraint."""
+    from optuna.trial import TrialState
+
+    cons = [v for k, v in t.system_attrs.items() if k.startswith("constraints:")]
+    return (
+        t.state == TrialState.COMPLETE
+        and t.user_attrs.get("simulated") == "full"
+        and all(c <= 0 for c in cons)
+    )
+
+
+def _seed(seed: int, number: int) -> int:
+    """The sampler's seed for trial ``number``: the same on a rerun, another for every trial."""
+    return int.from_bytes(hashlib.sha256(f"{seed}:{number}".encode()).digest()[:4], "little")
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _fig_attrs(fig: Any) -> dict[str, Any]:
+    return {
+        "runs": fig.runs,
+        "completed": fig.completed,
+        "transmissions_rate": _num(fig.transmissions_rate),
+        "error": _num(fig.error),
+        "transmissions_mean": _num(fig.transmissions_mean),
+        "error_mean": _num(fig.error_mean),
+    }
