@@ -22,10 +22,11 @@ import etobs.cli.check
 import etobs.experiments.compare_spec
 import etobs.experiments.spec
 import etobs.runtime.deployment
+import etobs.tuning.spec
 from etobs._spec import SpecError
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "specs.md"
-FORMATS = ("sweep", "compare", "check", "deploy")
+FORMATS = ("sweep", "compare", "check", "tune", "deploy")
 #: Tables of factory arguments: any argument of the factory (rows ``TABLE.*`` on the page),
 #: checked against its signature, not by :func:`etobs._spec.keys`.
 ARGUMENT_TABLES = {"system.fixed", "system.params", "rows[]", "grid", "scenarios[]"}
@@ -104,6 +105,13 @@ def parse(fmt, text, tmp_path, capsys):
         assert code == 0, out.out + out.err  # the examples certify: every condition holds
         return
     raw = tomllib.loads(text)
+    if fmt == "tune":  # parsed, then its observers' gains and E computed, as before the first trial
+        pytest.importorskip("cvxpy")
+        from etobs.tuning.evaluate import Evaluator
+        from etobs.tuning.spec import parse_tune_spec
+
+        Evaluator(parse_tune_spec(raw), None, {})
+        return
     if fmt == "deploy":
         parse_deployment(raw, tmp_path)
         return
@@ -112,9 +120,18 @@ def parse(fmt, text, tmp_path, capsys):
 
 
 def accepted(calls):
-    """{key path: whether it was required in every call} of the recorded calls."""
+    """{key path: whether it was required in every call} of the recorded calls.
+
+    A tuning's ``parameters.sigma.low`` is listed as ``parameters.<name>.low``, and an
+    ``[[observers]]`` entry's keys (but its name) as the ``observer.*`` they are.
+    """
     required = defaultdict(list)
     for where, req, opt in calls:
+        where = re.sub(r"^parameters\.[^.]+$", "parameters.<name>", where)
+        if re.fullmatch(r"observers\[\d+\]", where):
+            for k in req | opt:
+                required["observers[].name" if k == "name" else f"observer.{k}"].append(k in req)
+            continue
         prefix = "" if where == "spec" else re.sub(r"\[\d+\]", "[]", where) + "."
         for k in req | opt:
             required[prefix + k].append(k in req)

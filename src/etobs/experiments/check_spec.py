@@ -112,6 +112,20 @@ def certify_with(problem: Any, iss: Any, g: dict[str, Any], *, E: Any = None) ->
         )
 
 
+#: The keys an ``[observer]`` table must have, with what each expects.
+OBSERVER_NEEDS = {
+    "L": "'design', 'paper' or a matrix",
+    "c_v": "a number > 0",
+    "c": "a list of numbers (one per node)",
+}
+
+
+def observer_table(where: str, table: Any, needs: dict[str, str] | None = None) -> dict[str, Any]:
+    """An ``[observer]`` table (at key path ``where``) after checking its keys (``needs``: more required)."""
+    needed = {**OBSERVER_NEEDS, **(needs or {})}
+    return _keys(where, table, needed, set(OBSERVER_KEYS) - set(needed))
+
+
 def observer_gains(table: Any, problem: Any) -> tuple[Any, np.ndarray, list[str]]:
     """The ISS gains of an ``[observer]`` table, its ``L``, notes on where ``P`` and ``E_v`` came from."""
     with _table("observer", OBSERVER_KEYS):
@@ -146,13 +160,7 @@ def _iss(table: Any, problem: Any) -> tuple[Any, np.ndarray, list[str]]:
     from etobs.design import check_gain, observer_gain, quadratic_iss_gains, slope_vertices
     from etobs.design.iss import plant_disturbance_matrix
 
-    keys = set(OBSERVER_KEYS)
-    needed = {
-        "L": "'design', 'paper' or a matrix",
-        "c_v": "a number > 0",
-        "c": "a list of numbers (one per node)",
-    }
-    obs = _keys("observer", table, needed, keys - set(needed))
+    obs = observer_table("observer", table)
     if "structure" in obs:
         structure = _STRUCTURES.get(obs["structure"]) if isinstance(obs["structure"], str) else None
         if structure is None:

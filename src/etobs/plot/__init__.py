@@ -5,9 +5,11 @@ from etobs.plot.compare import plot_tradeoff
 from etobs.plot.figures import plot_error, plot_inter_event_times, plot_states
 from etobs.plot.held import plot_held_outputs
 from etobs.plot.trace import plot_trace
+from etobs.plot.tuning import plot_front
 
 __all__ = [
     "plot_error",
+    "plot_front",
     "plot_held_outputs",
     "plot_hybrid_arc",
     "plot_inter_event_times",

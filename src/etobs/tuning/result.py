@@ -41,7 +41,7 @@ class TrialRow:
             "trial": trial.number,
             "state": trial.state.name.lower(),
             "evaluated": sim,
-            "start": bool(a.get("start", False)),
+            "design": a.get("design", ""),
         }
         row.update(flatten_params(a.get("kwargs", {})))
         if a.get("observer"):

@@ -57,13 +57,17 @@ def observer_of(spec: TuneSpec, values: dict[str, Any]) -> str | None:
     return str(values[OBSERVER_VARIABLE])
 
 
-def start_values(spec: TuneSpec, n_nodes: int) -> dict[str, Any] | None:
-    """The variables of the start design (the factory's defaults), or ``None`` when outside the space.
+def start_values(spec: TuneSpec, n_nodes: int, params: dict[str, Any]) -> dict[str, Any] | None:
+    """The variables of a known design, or ``None`` when it lies outside the search space.
 
-    The start design is the factory called with ``system.fixed`` alone; it is a trial of
-    the search when each of its values lies in its box (shared values equal across nodes).
+    The design is the factory called with ``system.fixed`` and ``params`` (``{}``: the
+    start design, the factory's defaults); it is a trial of the search when each
+    searched value lies in its box (shared values equal across nodes) and it sets no
+    other argument than the searched ones.
     """
-    defaults = factory_defaults(spec.factory)
+    if set(params) - {p.name for p in spec.parameters}:
+        return None
+    defaults = {**factory_defaults(spec.factory), **params}
     out: dict[str, Any] = {}
     for p in spec.parameters:
         if p.name not in defaults:

@@ -23,7 +23,7 @@ from etobs._spec import name as _name
 from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.examples.registry import check_arguments, located, resolve_factory
-from etobs.experiments.check_spec import OBSERVER_KEYS, guarantees_table
+from etobs.experiments.check_spec import guarantees_table, observer_table
 from etobs.experiments.common import COMMON_KEYS, parse_common
 
 #: How a parameter is given to the factory: a list with one searched value per node, a
@@ -73,6 +73,7 @@ class Search:
     prune_share: float = 0.25
     prune_margin: float = 0.2
     screen: bool = True
+    error_floor: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -280,8 +281,7 @@ def _observers(top: dict[str, Any]) -> dict[str, dict[str, Any]]:
     if "observer" in top and "observers" in top:
         raise SpecError("give either `[observer]` (one) or `[[observers]]` (a choice), not both")
     if "observer" in top:
-        _keys("observer", top["observer"], set(), set(OBSERVER_KEYS))  # the rest when the gains are computed
-        return {"": dict(top["observer"])}
+        return {"": dict(observer_table("observer", top["observer"]))}  # values: when the gains are computed
     if "observers" not in top:
         return {}
     items = top["observers"]
@@ -291,7 +291,7 @@ def _observers(top: dict[str, Any]) -> dict[str, dict[str, Any]]:
         )
     out: dict[str, dict[str, Any]] = {}
     for i, o in enumerate(items):
-        _keys(f"observers[{i}]", o, {"name": "a name of letters, digits, '_' or '-'"}, set(OBSERVER_KEYS))
+        observer_table(f"observers[{i}]", o, {"name": "a name of letters, digits, '_' or '-'"})
         nm = _name(f"observers[{i}].name", o["name"])
         if nm in out:
             raise SpecError(f"`observers[{i}].name` repeats {nm!r}")
@@ -312,7 +312,7 @@ def _budget(table: Any, with_iss: bool) -> Budget:
 
 
 def _search(table: Any) -> Search:
-    names = ("trials", "seed", "batch", "startup", "prune_share", "prune_margin", "screen")
+    names = ("trials", "seed", "batch", "startup", "prune_share", "prune_margin", "screen", "error_floor")
     t = _keys("search", table, set(), set(names))
     d = Search()
     trials = int(_number("search.trials", t.get("trials", d.trials), lower=1, integer=True))
@@ -321,6 +321,9 @@ def _search(table: Any) -> Search:
     share = float(_number("search.prune_share", t.get("prune_share", d.prune_share), lower=0.0))
     if share >= 1:
         raise SpecError(f"`search.prune_share` must be < 1 (0: no pruning); got {share!r}")
+    floor = float(_number("search.error_floor", t.get("error_floor", d.error_floor), lower=0.0))
+    if floor > 1:
+        raise SpecError(f"`search.error_floor` must be in [0, 1] (a share of the budget); got {floor!r}")
     screen = t.get("screen", d.screen)
     if not isinstance(screen, bool):
         raise SpecError(f"`search.screen` must be true or false; got {shown(screen)}")
@@ -332,6 +335,7 @@ def _search(table: Any) -> Search:
         prune_share=share,
         prune_margin=float(_number("search.prune_margin", t.get("prune_margin", d.prune_margin), lower=0.0)),
         screen=screen,
+        error_floor=floor,
     )
 
 

@@ -149,9 +149,13 @@ def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any
     had = study.user_attrs.get("etobs_tuning")
     if had is None:
         study.set_user_attr("etobs_tuning", ident)
-        start = start_values(spec, ev.n_nodes)
-        if start is not None:  # the start design is trial 0: its figures are on the plot and in the tables
-            study.enqueue_trial(start, user_attrs={"start": True})
+        # the start design and the references inside the box are the first trials: the search
+        # starts from the designs the user knows (and they are on the plot and in the tables)
+        known = [("start", {})] + [(r.name, r.params) for r in spec.references]
+        for name, params in known:
+            values = start_values(spec, ev.n_nodes, params)
+            if values is not None:
+                study.enqueue_trial(values, user_attrs={"design": name})
     elif had != ident:
         raise InputError(
             f"the study {spec.name!r} in {url!r} holds the trials of another tuning (other parameters, runs, "
@@ -281,13 +285,19 @@ class _Loop:
             if n in pruned:
                 fig = pruned[n]
                 attrs.update(_fig_attrs(fig), simulated="pruned")
+                # its constraints on the first runs: the sampler ranks infeasible trials by how far
+                # they miss, so a pruned trial must say by how much (a default 1 would say nothing)
+                cons.update(ev.budget_constraint(fig))
                 self._saved(spec.runs - first)
                 state, values = TrialState.PRUNED, None
             elif n in sims and sims[n] is not None:
                 fig = ev.figures(sims[n])
                 cons.update(ev.budget_constraint(fig))
                 attrs.update(_fig_attrs(fig), simulated="full")
-                state, values = TrialState.COMPLETE, [fig.transmissions_rate, fig.error]
+                # the sampler sees errors below floor x budget as equal (search.error_floor): its
+                # trials go where the budget binds; the tables and the front keep the true error
+                seen = max(fig.error, spec.search.error_floor * spec.budget.error)
+                state, values = TrialState.COMPLETE, [fig.transmissions_rate, seen]
             elif n in sims:  # a chunk failed: its message is in the store's .error.json
                 attrs["simulated"] = "failed"
                 state, values = TrialState.FAIL, None
@@ -308,15 +318,11 @@ class _Loop:
         return len(cands)
 
     def _front(self) -> list[tuple[float, float]]:
-        pts = [tuple(t.values) for t in self.study.get_trials(deepcopy=False) if _feasible(t)]
+        pts = [_objectives(t) for t in self.study.get_trials(deepcopy=False) if _feasible(t)]
         return [pts[i] for i in pareto(pts)]
 
     def _best(self) -> str:
-        pts = [
-            (t.values[0], t.values[1], t.number)
-            for t in self.study.get_trials(deepcopy=False)
-            if _feasible(t)
-        ]
+        pts = [(*_objectives(t), t.number) for t in self.study.get_trials(deepcopy=False) if _feasible(t)]
         if not pts:
             return "no feasible point yet"
         tx, err, n = min(pts)
@@ -333,6 +339,11 @@ def _feasible(t: Any) -> bool:
         and t.user_attrs.get("simulated") == "full"
         and all(c <= 0 for c in cons)
     )
+
+
+def _objectives(t: Any) -> tuple[float, float]:
+    """A trial's true objectives (the sampler's error may be raised to ``error_floor x budget``)."""
+    return (t.user_attrs["transmissions_rate"], t.user_attrs["error"])
 
 
 def _seed(seed: int, number: int) -> int:

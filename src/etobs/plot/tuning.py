@@ -1,0 +1,94 @@
+"""The front of a tuning: transmissions per node and second against the error."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from etobs.plot.figures import _figure
+
+if TYPE_CHECKING:
+    from etobs.tuning.result import TuningResult
+
+
+def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
+    """Every simulated trial, the feasible front, the start design and the references.
+
+    Feasible trials (certified, within the budget and every constraint) are filled;
+    the others (not certified, over the budget or pruned) are grey or hollow, the pruned
+    ones at their figures on the first share of runs. The front is a step line; each
+    front point's held-out figures are joined to it by a thin line. The budget is a
+    horizontal line. Lower left is better.
+    """
+    fig, axes = _figure(1, 4.6)
+    ax = axes[0]
+
+    def pts(rows: list[dict[str, Any]], x: str = "transmissions_rate", y: str = "error") -> tuple[list, list]:
+        keep = [r for r in rows if _finite(r.get(x)) and _finite(r.get(y))]
+        return [r[x] for r in keep], [r[y] for r in keep]
+
+    groups = [
+        (
+            "not certified",
+            [r for r in result.trials if r["evaluated"] == "full" and not r["certified"]],
+            "x",
+            "0.55",
+        ),
+        (
+            "certified, over budget or a constraint",
+            [r for r in result.trials if r["evaluated"] == "full" and r["certified"] and not r["feasible"]],
+            "o",
+            "0.7",
+        ),
+        (
+            "pruned (first share of runs)",
+            [r for r in result.trials if r["evaluated"] == "pruned"],
+            ".",
+            "0.8",
+        ),
+        ("certified, within budget", [r for r in result.trials if r["feasible"]], "o", "C0"),
+    ]
+    for label, rows, marker, color in groups:
+        x, y = pts(rows)
+        if x:
+            ax.plot(x, y, marker=marker, ls="none", color=color, ms=5, label=f"{label} ({len(x)})", alpha=0.8)
+    x, y = pts(result.front)
+    if x:
+        ax.step(x, y, where="post", color="C3", lw=1.2, label=f"front ({len(x)})")
+        ax.plot(x, y, "o", color="C3", ms=7)
+        for r in result.front:
+            hx, hy = r.get("holdout_transmissions_rate"), r.get("holdout_error")
+            if _finite(hx) and _finite(hy):
+                ax.plot([r["transmissions_rate"], hx], [r["error"], hy], color="C3", lw=0.6, alpha=0.6)
+                ax.plot(hx, hy, "s", mfc="none", color="C3", ms=6)
+        ax.plot([], [], "s", mfc="none", color="C3", label="front on held-out runs")
+    for k, r in enumerate(result.references):
+        if _finite(r.get("transmissions_rate")) and _finite(r.get("error")):
+            marker = "*" if r["name"] == "start" else "D"
+            ax.plot(
+                r["transmissions_rate"],
+                r["error"],
+                marker,
+                color=f"C{(k + 1) % 10}",
+                ms=11 if marker == "*" else 7,
+                ls="none",
+                label=f"{r['name']}{'' if r.get('certified') else ' (not certified)'}",
+            )
+    what = "certified error bound" if result.budget_kind == "certified" else "budget"
+    ax.axhline(result.budget, color="k", ls="--", lw=0.8, label=f"{what} {result.budget:.4g}")
+    if log:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("transmissions per node and second (mean over runs)")
+    ax.set_ylabel("simulated error statistic")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize="small", loc="best")
+    fig.suptitle(
+        f"Tuning {result.summary.get('name', '')}: {len(result.trials)} trials, "
+        f"{len(result.front)} on the front"
+    )
+    return fig, ax
+
+
+def _finite(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)

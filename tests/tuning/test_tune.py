@@ -1,0 +1,222 @@
+"""A tuning end to end: certified front, pruning, screening, exported specs, resume after kill -9."""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from etobs.cli.main import main
+from etobs.errors import InputError
+from etobs.tuning import parse_tune_spec, tune
+from etobs.tuning.front import dominates
+from tests.tuning.conftest import BASE, raw_tune
+
+pytestmark = [
+    pytest.mark.usefixtures("cvxpy"),
+    # a candidate with sigma*c >= 1 simulated (screen = false) warns in its chunk, as a sweep of it does
+    pytest.mark.filterwarnings("ignore:.*Theorem 1 needs sigma_i c_i < 1:RuntimeWarning"),
+]
+
+
+def front_of(result):
+    return [(r["transmissions_rate"], r["error"]) for r in result.front]
+
+
+@pytest.fixture(scope="module")
+def wide(tmp_path_factory):
+    """sigma up to 2000 with c = 0.001: sigma*c >= 1 fails Theorem 1; simulated anyway (no screening)."""
+    pytest.importorskip("cvxpy")
+    raw = raw_tune(
+        parameters={**BASE["parameters"], "sigma": {"low": 0.0, "high": 2000.0}},
+        search={**BASE["search"], "trials": 16, "screen": False, "prune_share": 0.0},
+        # a known design that fails Theorem 1 (sigma*c = 1.5), and a good one
+        references=[
+            {"name": "row 8", "params": {"a": [1.0, 1.0]}},
+            {
+                "name": "sigma*c > 1",
+                "params": {"sigma": [1500.0, 1500.0], "eps": [1.0, 1.0], "a": [1.0, 1.0]},
+            },
+        ],
+    )
+    out = tmp_path_factory.mktemp("wide")
+    return tune(parse_tune_spec(raw), out, executor="serial", progress=False)
+
+
+def test_a_candidate_that_fails_a_condition_is_never_on_the_front(wide):
+    failing = [r for r in wide.trials if r["evaluated"] == "full" and not r["certified"]]
+    assert failing, "the box must hold candidates with sigma*c >= 1 for this test to mean anything"
+    assert all("sigma*c < 1 (Theorem 1)" in r["cert_failures"] for r in failing)
+    assert all(max(r["sigma1"], r["sigma2"]) >= 1000 for r in failing)
+    assert wide.front
+    for r in wide.front:
+        assert r["certified"] and r["feasible"]
+        assert all(r[k] <= 0 for k in r if k.startswith("constraint_"))
+        assert r["error"] <= 12.0
+
+
+def test_the_front_is_the_non_dominated_feasible_trials(wide):
+    feasible = [(r["transmissions_rate"], r["error"]) for r in wide.trials if r["feasible"]]
+    front = front_of(wide)
+    assert all(not dominates(p, f) for f in front for p in feasible)
+    for p in feasible:
+        assert p in front or any(dominates(f, p) or f == p for f in front)
+    assert front == sorted(front)
+
+
+def test_the_trial_count_is_the_one_asked_for_and_the_start_and_references_are_trials(wide):
+    assert len(wide.trials) == 16
+    # the start design (a = (2, 3)) is not in the space (a shared): the references in it come first
+    assert [r["design"] for r in wide.trials[:3]] == ["row 8", "sigma*c > 1", ""]
+    row8 = wide.trials[0]
+    assert (row8["sigma1"], row8["sigma2"], row8["eps1"], row8["a1"], row8["a2"]) == (
+        600.0,
+        800.0,
+        10.0,
+        1.0,
+        1.0,
+    )
+    ref = {r["name"]: r for r in wide.references}
+    assert list(ref) == ["start", "row 8", "sigma*c > 1"]
+    # a reference and the trial of the same design: the same runs, the same figures
+    assert ref["row 8"]["transmissions_rate"] == row8["transmissions_rate"]
+    assert ref["row 8"]["error"] == row8["error"]
+    assert not ref["sigma*c > 1"]["certified"] and ref["start"]["certified"]
+
+
+def test_the_tables_and_specs_are_written(wide):
+
+    for name in ("trials", "front", "references"):
+        csv = pd.read_csv(wide.out / f"{name}.csv")
+        parquet = pd.read_parquet(wide.out / f"{name}.parquet")
+        assert len(csv) == len(parquet) == len(getattr(wide, name))
+    assert list(wide.to_pandas("front")["trial"]) == [r["trial"] for r in wide.front]
+    with pytest.raises(InputError, match=r"`table` must be one of front, trials, references; got 'runs'"):
+        wide.to_pandas("runs")
+    summary = json.loads((wide.out / "tuning.json").read_text())
+    assert summary["trials"] == 16 and summary["front"] == len(wide.front)
+
+
+def test_every_front_point_has_held_out_figures(wide):
+    for r in wide.front:
+        assert r["holdout_runs"] == 3
+        assert math.isfinite(r["holdout_error"]) and math.isfinite(r["holdout_transmissions_rate"])
+        assert r["holdout_over_budget"] == (r["holdout_error"] > 12.0)
+
+
+def test_the_exported_specs_certify_and_reproduce_the_figures(wide, tmp_path, capsys):
+    r = wide.front[0]
+    assert main(["check", r["check_spec"]]) == 0
+    assert "certificate: all conditions hold" in capsys.readouterr().out
+    assert main(["sweep", r["sweep_spec"], "--out", str(tmp_path / "s"), "--executor", "serial"]) == 0
+    agg = pd.read_csv(tmp_path / "s" / "aggregate.csv").iloc[0]
+    assert agg["transmissions_mean"] == r["transmissions_mean"]
+    assert agg["error_mean"] == r["error_mean"]
+    spec = tomllib.loads(Path(r["sweep_spec"]).read_text())
+    assert spec["rows"][0]["sigma"] == [r["sigma1"], r["sigma2"]]
+
+
+def test_screened_candidates_are_not_simulated(tmp_path):
+    raw = raw_tune(
+        parameters={**BASE["parameters"], "sigma": {"low": 1100.0, "high": 2000.0}},
+        search={**BASE["search"], "trials": 4},
+        references=[],
+    )
+    res = tune(parse_tune_spec(raw), tmp_path, executor="serial", progress=False)
+    assert [r["evaluated"] for r in res.trials] == ["screened"] * 4  # no start: 600 is outside the box
+    assert all(r["runs"] == 0 and r["transmissions_rate"] is None for r in res.trials)
+    assert res.front == [] and res.saved_runs == 16
+
+
+def test_pruned_candidates_broke_the_budget_by_the_margin_on_their_first_runs(tmp_path):
+    raw = raw_tune(
+        budget={"kind": "simulated", "error": 6.0},
+        search={**BASE["search"], "trials": 12, "prune_share": 0.5, "prune_margin": 0.1},
+    )
+    res = tune(parse_tune_spec(raw), tmp_path, executor="serial", progress=False)
+    pruned = [r for r in res.trials if r["evaluated"] == "pruned"]
+    assert pruned, "the budget must prune some candidates for this test to mean anything"
+    front = [(r["transmissions_rate"], r["error"]) for r in res.trials if r["feasible"]]
+    for r in pruned:
+        assert r["runs"] == 2  # half of 4
+        beaten = any(dominates(f, (r["transmissions_rate"], r["error"]), 0.1) for f in front)
+        assert r["error"] > 6.0 * 1.1 or beaten
+    for r in res.trials:
+        if r["evaluated"] == "full":
+            assert r["runs"] == 4
+
+
+def test_another_tuning_in_the_same_folder_is_refused(tmp_path):
+    spec = parse_tune_spec(raw_tune(search={**BASE["search"], "trials": 1}))
+    tune(spec, tmp_path, executor="serial", progress=False)
+    other = parse_tune_spec(raw_tune(search={**BASE["search"], "trials": 1, "seed": 4}))
+    with pytest.raises(InputError, match=r"the study 'arm' in .* holds the trials of another tuning"):
+        tune(other, tmp_path, executor="serial", progress=False)
+
+
+def test_a_budget_no_candidate_meets_is_one_line(tmp_path, capsys):
+    path = tmp_path / "tune.toml"
+    raw = raw_tune(budget={"kind": "simulated", "error": 1e-6}, search={**BASE["search"], "trials": 4})
+    import tomli_w
+
+    path.write_text(tomli_w.dumps(raw))
+    code = main(["tune", str(path), "--out", str(tmp_path / "o"), "--executor", "serial", "--no-plot"])
+    out = capsys.readouterr()
+    assert code == 1
+    assert out.err.count("\n") == 1
+    assert out.err.startswith(
+        "etobs: no candidate of 4 met every constraint: the certified candidate nearest"
+    )
+    assert "against the budget 1e-06 (budget.error)" in out.err
+
+
+KILLER = """
+import os, signal, sys, json
+from etobs.tuning import parse_tune_spec, tune
+
+def main():
+    raw = json.loads(sys.argv[1])
+    def kill(row):
+        if row.row["trial"] == int(sys.argv[3]):
+            os.kill(os.getpid(), signal.SIGKILL)  # kill -9 in the middle of a batch
+    tune(parse_tune_spec(raw), sys.argv[2], executor="serial", progress=False, on_trial=kill)
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def test_a_tuning_killed_with_sigkill_resumes_to_the_same_front(tmp_path):
+    raw = raw_tune(search={**BASE["search"], "trials": 12})
+    whole = tune(parse_tune_spec(raw), tmp_path / "whole", executor="serial", progress=False)
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    out = tmp_path / "killed"
+    proc = subprocess.run(
+        [sys.executable, str(script), json.dumps(raw), str(out), "5"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ},
+    )
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    import optuna
+
+    study = optuna.load_study(study_name="arm", storage=f"sqlite:///{out / 'study.db'}")
+    states = [t.state.name for t in study.trials]
+    assert len(states) == 8 and states[6:] == ["RUNNING", "RUNNING"]  # 6, 7: simulated, never told
+    assert all(s in ("COMPLETE", "PRUNED") for s in states[:6])
+    chunks = {p: p.stat().st_mtime_ns for p in (out / "runs").rglob("*") if p.is_file() and p.name != ".lock"}
+    resumed = tune(parse_tune_spec(raw), out, executor="serial", progress=False)
+    key = lambda rows: [(r["trial"], r["state"], r["transmissions_rate"], r["error"]) for r in rows]  # noqa: E731
+    assert key(resumed.trials) == key(whole.trials)
+    assert front_of(resumed) == front_of(whole)
+    assert len(optuna.load_study(study_name="arm", storage=f"sqlite:///{out / 'study.db'}").trials) == 12
+    # no run computed twice: every chunk stored before the kill is read back, none written again
+    assert all(p.stat().st_mtime_ns == t for p, t in chunks.items())
