@@ -26,10 +26,3 @@ def test_which_points_are_on_a_front():
 def test_domination_needs_one_strictly_better_objective():
     assert dominates((1, 2), (1, 3)) and not dominates((1, 3), (1, 3))
     assert not dominates((1, 4), (2, 3))
-
-
-def test_clearly_dominated_at_the_margin_on_both_sides():
-    # a point beats b by the margin 0.2 when a_k * 1.2 <= b_k in every objective
-    assert dominates((1.0, 2.0), (1.2, 2.4), margin=0.2)
-    assert not dominates((1.0, 2.0), (1.2, 2.4 - 1e-9), margin=0.2)
-    assert not dominates((1.0, 2.0), (1.2 - 1e-9, 3.0), margin=0.2)

@@ -15,7 +15,9 @@ import pytest
 from etobs.cli.main import main
 from etobs.errors import InputError
 from etobs.tuning import parse_tune_spec, tune
+from etobs.tuning.evaluate import SimulatedFigures
 from etobs.tuning.front import dominates
+from etobs.tuning.tune import _clearly_out
 from tests.tuning.conftest import BASE, raw_tune
 
 pytestmark = [
@@ -137,16 +139,22 @@ def test_screened_candidates_are_not_simulated(tmp_path):
 def test_pruned_candidates_broke_the_budget_by_the_margin_on_their_first_runs(tmp_path):
     raw = raw_tune(
         budget={"kind": "simulated", "error": 6.0},
-        search={**BASE["search"], "trials": 12, "prune_share": 0.5, "prune_margin": 0.1},
+        search={**BASE["search"], "trials": 12, "prune_share": 0.5, "prune_z": 1.0},
     )
     res = tune(parse_tune_spec(raw), tmp_path, executor="serial", progress=False)
     pruned = [r for r in res.trials if r["evaluated"] == "pruned"]
     assert pruned, "the budget must prune some candidates for this test to mean anything"
-    front = [(r["transmissions_rate"], r["error"]) for r in res.trials if r["feasible"]]
     for r in pruned:
         assert r["runs"] == 2  # half of 4
-        beaten = any(dominates(f, (r["transmissions_rate"], r["error"]), 0.1) for f in front)
-        assert r["error"] > 6.0 * 1.1 or beaten
+        # over the budget by one standard error of its two runs' mean, or then beaten by the front:
+        # the feasible trials of the batches before its own (batches of 4), less one standard error
+        before = [
+            (f["transmissions_rate"], f["error"])
+            for f in res.trials
+            if f["feasible"] and f["trial"] < r["trial"] // 4 * 4
+        ]
+        tx, err = r["transmissions_rate"] - r["transmissions_se"], r["error"] - r["error_se"]
+        assert err > 6.0 or any(p[0] <= tx and p[1] <= err for p in before)
     for r in res.trials:
         if r["evaluated"] == "full":
             assert r["runs"] == 4
@@ -220,3 +228,17 @@ def test_a_tuning_killed_with_sigkill_resumes_to_the_same_front(tmp_path):
     assert len(optuna.load_study(study_name="arm", storage=f"sqlite:///{out / 'study.db'}").trials) == 12
     # no run computed twice: every chunk stored before the kill is read back, none written again
     assert all(p.stat().st_mtime_ns == t for p, t in chunks.items())
+
+
+def test_a_candidate_is_clearly_out_at_z_standard_errors_on_both_sides():
+    spec = parse_tune_spec(raw_tune(search={**BASE["search"], "prune_z": 2.0}))  # budget 12
+
+    def fig(tx, err, se_tx=0.1, se_err=0.5):
+        return SimulatedFigures(4, 4, tx, err, tx * 60, err, se_tx, se_err)
+
+    assert _clearly_out(fig(1.0, 13.0 + 1e-9), [], spec)  # 13 - 2 x 0.5 > 12
+    assert not _clearly_out(fig(1.0, 13.0), [], spec)
+    front = [(1.0, 5.0)]
+    assert _clearly_out(fig(1.2 + 1e-9, 6.0 + 1e-9), front, spec)  # 1.2 - 0.2 >= 1, 6 - 1 >= 5
+    assert not _clearly_out(fig(1.2 - 1e-9, 8.0), front, spec)
+    assert not _clearly_out(fig(3.0, 6.0 - 1e-9), front, spec)

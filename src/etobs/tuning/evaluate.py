@@ -61,6 +61,8 @@ class SimulatedFigures:
     error: float
     transmissions_mean: float
     error_mean: float
+    transmissions_se: float = 0.0
+    error_se: float = 0.0
 
 
 class Evaluator:
@@ -181,6 +183,10 @@ class Evaluator:
             error=stat,
             transmissions_mean=float(np.mean(counts)),
             error_mean=mean,
+            # standard errors of the means over the runs (of the rate, and of the error's mean,
+            # which stands for a quantile's too), for pruning on the first runs
+            transmissions_se=_se(counts) / (nodes * self.spec.window) if self.spec.window > 0 else 0.0,
+            error_se=_se(errors),
         )
 
     def budget_constraint(self, fig: SimulatedFigures) -> dict[str, float]:
@@ -190,6 +196,11 @@ class Evaluator:
             b = self.spec.budget.error
             cons["budget"] = (fig.error - b) / b if math.isfinite(fig.error) else 1.0
         return cons
+
+
+def _se(values: list[float]) -> float:
+    """Standard error of the mean of ``values`` (0 for fewer than two)."""
+    return float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
 def _short(tau: float, need: float) -> float:

@@ -5,14 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 
-def dominates(a: Sequence[float], b: Sequence[float], margin: float = 0.0) -> bool:
-    """Whether ``a`` is at least as good as ``b`` in every objective and better in one (both minimized).
-
-    With ``margin > 0``, ``a`` must be better by that factor in every objective
-    (``a_k (1 + margin) <= b_k``): *clearly* dominates, as pruning asks.
-    """
-    if margin > 0:
-        return all(x * (1 + margin) <= y for x, y in zip(a, b, strict=True))
+def dominates(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether ``a`` is at least as good as ``b`` in every objective and better in one (both minimized)."""
     return all(x <= y for x, y in zip(a, b, strict=True)) and any(x < y for x, y in zip(a, b, strict=True))
 
 

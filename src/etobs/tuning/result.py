@@ -34,7 +34,10 @@ class TrialRow:
     @classmethod
     def of(cls, trial: Any, spec: TuneSpec, n_nodes: int) -> TrialRow:
         """The row of an Optuna trial told by :func:`~etobs.tuning.tune.tune`."""
-        a = trial.user_attrs
+        a = {
+            **trial.user_attrs.get("etobs", {}),
+            **{k: v for k, v in trial.user_attrs.items() if k != "etobs"},
+        }
         cons = {k.split(":", 1)[1]: v for k, v in trial.system_attrs.items() if k.startswith("constraints:")}
         sim = a.get("simulated", "running")
         row: dict[str, Any] = {
@@ -52,6 +55,8 @@ class TrialRow:
             error=a.get("error") if sim in ("full", "pruned") else None,
             transmissions_mean=a.get("transmissions_mean") if sim in ("full", "pruned") else None,
             error_mean=a.get("error_mean") if sim in ("full", "pruned") else None,
+            transmissions_se=a.get("transmissions_se") if sim in ("full", "pruned") else None,
+            error_se=a.get("error_se") if sim in ("full", "pruned") else None,
             runs=a.get("runs", 0),
             completed=a.get("completed", 0),
             certified=bool(a.get("cert_ok", False)),
@@ -121,7 +126,7 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
     )
     trials = {t.number: t for t in study.get_trials(deepcopy=False)}
     cands = [
-        (trials[r["trial"]].user_attrs["kwargs"], trials[r["trial"]].user_attrs.get("observer"))
+        (trials[r["trial"]].user_attrs["etobs"]["kwargs"], trials[r["trial"]].user_attrs["etobs"]["observer"])
         for r in front
     ]
     first_obs = next(iter(spec.observers), None)

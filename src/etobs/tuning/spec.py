@@ -71,7 +71,7 @@ class Search:
     batch: int = 4
     startup: int = 16
     prune_share: float = 0.25
-    prune_margin: float = 0.2
+    prune_z: float = 2.0
     screen: bool = True
     error_floor: float = 0.5
 
@@ -312,7 +312,7 @@ def _budget(table: Any, with_iss: bool) -> Budget:
 
 
 def _search(table: Any) -> Search:
-    names = ("trials", "seed", "batch", "startup", "prune_share", "prune_margin", "screen", "error_floor")
+    names = ("trials", "seed", "batch", "startup", "prune_share", "prune_z", "screen", "error_floor")
     t = _keys("search", table, set(), set(names))
     d = Search()
     trials = int(_number("search.trials", t.get("trials", d.trials), lower=1, integer=True))
@@ -333,7 +333,7 @@ def _search(table: Any) -> Search:
         batch=int(_number("search.batch", t.get("batch", d.batch), lower=1, integer=True)),
         startup=int(_number("search.startup", t.get("startup", d.startup), lower=0, integer=True)),
         prune_share=share,
-        prune_margin=float(_number("search.prune_margin", t.get("prune_margin", d.prune_margin), lower=0.0)),
+        prune_z=float(_number("search.prune_z", t.get("prune_z", d.prune_z), lower=0.0)),
         screen=screen,
         error_floor=floor,
     )

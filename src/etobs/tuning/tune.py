@@ -26,11 +26,13 @@ from etobs.errors import InputError
 from etobs.experiments.executors import check_execution, process_pool, usable_pool
 from etobs.experiments.store import ResultStore, atomic_write
 from etobs.tuning.evaluate import Evaluator
-from etobs.tuning.front import dominates, pareto
+from etobs.tuning.front import pareto
 from etobs.tuning.result import TrialRow, TuningResult, finish
 from etobs.tuning.space import distributions, factory_kwargs, observer_of, start_values
 from etobs.tuning.spec import TuneSpec, load_tune_spec
 
+#: The user attribute of a trial that holds its figures (one write to the storage).
+ATTR = "etobs"
 #: Directions of the two objectives: transmissions per node and second, error.
 DIRECTIONS = ("minimize", "minimize")
 
@@ -255,20 +257,12 @@ class _Loop:
         if spec.search.prune_share > 0 and 0 < first < spec.runs and live:
             recs = ev.simulate([(c[1], c[2]) for c in live], first)
             for c, r in zip(live, recs, strict=True):
-                if r is None:
-                    continue
-                fig = ev.figures(r)
-                over = spec.budget.kind == "simulated" and fig.error > spec.budget.error * (
-                    1 + spec.search.prune_margin
-                )
-                beaten = any(
-                    dominates(p, (fig.transmissions_rate, fig.error), spec.search.prune_margin) for p in front
-                )
-                if over or beaten:
-                    pruned[c[0]] = fig
+                if r is not None and _clearly_out(ev.figures(r), front, spec):
+                    pruned[c[0]] = ev.figures(r)
         full = [c for c in live if c[0] not in pruned]
         recs = ev.simulate([(c[1], c[2]) for c in full], spec.runs) if full else []
         sims = dict(zip([c[0] for c in full], recs, strict=True))
+        saved = 0
         for n, kwargs, obs, cert in cands:
             trial = optuna.trial.Trial(self.study, frozen[n]._trial_id)
             attrs: dict[str, Any] = {
@@ -288,7 +282,7 @@ class _Loop:
                 # its constraints on the first runs: the sampler ranks infeasible trials by how far
                 # they miss, so a pruned trial must say by how much (a default 1 would say nothing)
                 cons.update(ev.budget_constraint(fig))
-                self._saved(spec.runs - first)
+                saved += spec.runs - first
                 state, values = TrialState.PRUNED, None
             elif n in sims and sims[n] is not None:
                 fig = ev.figures(sims[n])
@@ -302,19 +296,20 @@ class _Loop:
                 attrs["simulated"] = "failed"
                 state, values = TrialState.FAIL, None
             else:  # screened out: the certificate rules it out whatever it simulates
-                self._saved(spec.runs)
+                saved += spec.runs
                 attrs["simulated"] = "screened"
                 state, values = TrialState.COMPLETE, [math.inf, math.inf]
             # every trial carries the same constraints; one not evaluated counts as not met
             for k in self.names:
                 cons.setdefault(k, 1.0)
-            for k, x in attrs.items():
-                trial.set_user_attr(k, x)
+            trial.set_user_attr(ATTR, attrs)  # one write: each is a transaction of the storage
             for k, x in cons.items():
                 trial.set_constraint(k, float(x))
             self.study.tell(n, values, state=state)
             if self.on_trial is not None:
                 self.on_trial(TrialRow.of(self.study.trials[n], spec, ev.n_nodes))
+        if saved:
+            self._saved(saved)
         return len(cands)
 
     def _front(self) -> list[tuple[float, float]]:
@@ -336,14 +331,27 @@ def _feasible(t: Any) -> bool:
     cons = [v for k, v in t.system_attrs.items() if k.startswith("constraints:")]
     return (
         t.state == TrialState.COMPLETE
-        and t.user_attrs.get("simulated") == "full"
+        and t.user_attrs.get(ATTR, {}).get("simulated") == "full"
         and all(c <= 0 for c in cons)
     )
 
 
 def _objectives(t: Any) -> tuple[float, float]:
     """A trial's true objectives (the sampler's error may be raised to ``error_floor x budget``)."""
-    return (t.user_attrs["transmissions_rate"], t.user_attrs["error"])
+    a = t.user_attrs[ATTR]
+    return (a["transmissions_rate"], a["error"])
+
+
+def _clearly_out(fig: Any, front: list[tuple[float, float]], spec: TuneSpec) -> bool:
+    """Whether a candidate's first runs show it clearly over the budget, or clearly dominated.
+
+    Clearly: by ``search.prune_z`` standard errors of its means over those runs, so that a
+    candidate is stopped early only when its remaining runs are unlikely to change the verdict.
+    """
+    z = spec.search.prune_z
+    err, tx = fig.error - z * fig.error_se, fig.transmissions_rate - z * fig.transmissions_se
+    over = spec.budget.kind == "simulated" and err > spec.budget.error
+    return over or any(p[0] <= tx and p[1] <= err and p != (tx, err) for p in front)
 
 
 def _seed(seed: int, number: int) -> int:
@@ -363,4 +371,6 @@ def _fig_attrs(fig: Any) -> dict[str, Any]:
         "error": _num(fig.error),
         "transmissions_mean": _num(fig.transmissions_mean),
         "error_mean": _num(fig.error_mean),
+        "transmissions_se": _num(fig.transmissions_se),
+        "error_se": _num(fig.error_se),
     }
