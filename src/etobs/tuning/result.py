@@ -140,6 +140,7 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
         r["holdout_runs"] = spec.validation_runs
         r["holdout_transmissions_rate"] = None if fig is None else fig.transmissions_rate
         r["holdout_error"] = None if fig is None else fig.error
+        r["holdout_transmissions_mean"] = None if fig is None else fig.transmissions_mean
         r["holdout_over_budget"] = fig is None or not fig.error <= spec.budget.error
         r["check_spec"], r["sweep_spec"] = _export(spec, ev, specs, f"front-{k:02d}", kw, obs)
     write_table(out, "trials", rows)
