@@ -242,3 +242,43 @@ def test_a_candidate_is_clearly_out_at_z_standard_errors_on_both_sides():
     assert _clearly_out(fig(1.2 + 1e-9, 6.0 + 1e-9), front, spec)  # 1.2 - 0.2 >= 1, 6 - 1 >= 5
     assert not _clearly_out(fig(1.2 - 1e-9, 8.0), front, spec)
     assert not _clearly_out(fig(3.0, 6.0 - 1e-9), front, spec)
+
+
+def test_the_observer_is_a_variable_of_the_search_with_two_observers(tmp_path, capsys):
+    paper = {"structure": "robot_arm", "L": "paper", "c_v": 0.1, "c": [0.1, 0.1]}
+    lmi = {"structure": "robot_arm", "L": "design", "c_v": 0.1, "c": [0.1, 0.1]}
+    raw = raw_tune(
+        observer=None,
+        observers=[{"name": "paper", **paper}, {"name": "lmi", **lmi}],
+        search={**BASE["search"], "trials": 8, "prune_share": 0.0},
+        budget={"kind": "simulated", "error": 100.0},
+    )
+    spec = parse_tune_spec(raw)
+    res = tune(spec, tmp_path, executor="serial", progress=False)
+    assert {r["observer"] for r in res.trials if r["evaluated"] == "full"} == {"paper", "lmi"}
+    from etobs.examples.robot_arm import L_PAPER
+
+    for r in res.front:
+        check = tomllib.loads(Path(r["check_spec"]).read_text())
+        sweep = tomllib.loads(Path(r["sweep_spec"]).read_text())
+        assert check["observer"] == (paper if r["observer"] == "paper" else lmi)
+        # simulated with the chosen observer's gain: the paper's, or the LMI design's (another)
+        L = sweep["rows"][0]["L"]
+        assert (L == L_PAPER.tolist()) == (r["observer"] == "paper")
+        assert main(["check", r["check_spec"]]) == 0
+    # every trial was simulated with its own observer's L: its runs are stored under that L's key
+    from etobs.experiments.spec import parse_spec
+    from etobs.experiments.store import ResultStore, task_key
+    from etobs.tuning.evaluate import Evaluator
+
+    ev, store = Evaluator(spec, None, {}), ResultStore(tmp_path / "runs")
+    assert ev.gains["paper"][1] != ev.gains["lmi"][1]
+    for r in res.trials:
+        if r["evaluated"] != "full":
+            continue
+        kwargs = {k: [r[f"{k}1"], r[f"{k}2"]] for k in ("sigma", "eps", "a")}
+        stored = {
+            name: len(store.records(task_key(parse_spec(spec.sweep_raw([{**kwargs, "L": g[1]}])), 0), 4))
+            for name, g in ev.gains.items()
+        }
+        assert stored == {name: 4 if name == r["observer"] else 0 for name in ev.gains}

@@ -58,6 +58,12 @@ def propose_rules(
     of ``sigma_i c_i`` in 0, 0.1, 0.3, ..., 0.9 (``tests/design/test_propose_rules.py``
     keeps the comparison). Compare candidates by simulation.
 
+    This is the quick start: one certified design in one call. To find the certified
+    design that sends least for an accuracy budget (simulated or certified), give this
+    one as a reference to :func:`etobs.tuning.tune` (``etobs tune SPEC``, docs/tuning.md),
+    which searches ``sigma``, ``c``, ``eps``, ``a``, ``ell``, ``b``, ``eta0`` and the
+    observer gain with the certificate as a hard constraint.
+
     Raises
     ------
     InputError

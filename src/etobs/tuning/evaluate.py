@@ -91,8 +91,13 @@ class Evaluator:
         self.E = rate_bound(problem, spec.guarantees)
 
     def sim_kwargs(self, kwargs: dict[str, Any], observer: str | None) -> dict[str, Any]:
-        """The factory's arguments a candidate is simulated with (its observer's ``L`` added)."""
-        if observer is None or not self.takes_L:
+        """The factory's arguments a candidate is simulated with (its observer's ``L`` added).
+
+        The observer's ``L`` is added when the factory takes ``L`` and ``system.fixed`` does not
+        give it (as ``etobs check`` does); a ``system.fixed.L`` other than the observer's fails
+        the certificate's condition that the ISS gains are the problem's observer.
+        """
+        if observer is None or not self.takes_L or "L" in self.spec.fixed:
             return dict(kwargs)
         return {**kwargs, "L": self.gains[observer][1]}
 

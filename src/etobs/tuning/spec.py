@@ -213,10 +213,10 @@ def parse_tune_spec(raw: dict[str, Any], *, folder: str | Path | None = None) ->
     calls += [(f"references[{i}].params", {**fixed, **r.params}) for i, r in enumerate(refs)]
     calls.append(("parameters", {**fixed, **{n: None for n in names if n != OBSERVER_VARIABLE}}))
     check_arguments(factory, calls)
-    if observers and "L" in fixed:
+    if len(observers) > 1 and "L" in fixed:  # with one observer, the certificate compares the two
         raise SpecError(
-            "`system.fixed.L` and `[observer]`/`[[observers]]` both give the observer gain; the certified "
-            "gain is the observer's: remove `system.fixed.L`"
+            "`system.fixed.L` fixes the observer gain that `[[observers]]` chooses: remove `system.fixed.L` "
+            "(each candidate is simulated with its observer's L)"
         )
     return TuneSpec(
         name=common["name"],

@@ -1,0 +1,36 @@
+"""docs/tuning.md's pendulum runs as written: propose_rules' design, a certified budget, a tuning."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("cvxpy")
+pytest.importorskip("optuna")
+
+from tests.docs_blocks import run_python_blocks
+
+PAGE = Path(__file__).parents[1] / "docs" / "tuning.md"
+
+
+@pytest.mark.slow
+def test_the_pendulum_of_the_tuning_page_runs_and_stays_within_the_certified_budget(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))  # the page imports the pendulum.py it has the reader save
+    try:
+        ns = run_python_blocks(PAGE, tmp_path)
+    finally:
+        sys.modules.pop("pendulum", None)
+    out = capsys.readouterr().out
+    result = ns["result"]
+    assert "of which the disturbance alone is 51% of its square" in out
+    start = {r["name"]: r for r in result.references}["propose_rules"]
+    assert start["certified"]
+    assert result.front, "the proposal itself is within the budget: the front cannot be empty"
+    for r in result.front:
+        assert r["certified"] and r["error_bound"] <= result.budget
+    # the tuned design sends no more than the proposal (it is a trial of the search)
+    assert result.front[0]["transmissions_mean"] <= start["transmissions_mean"]
+    assert (tmp_path / "pendulum-tune" / "front.csv").exists()
