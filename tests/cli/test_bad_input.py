@@ -53,6 +53,16 @@ def check_spec(factory=LINEAR, params="{}", number="1.0", top=""):
     return f"{top}[system]\nfactory = {factory}\nparams = {params}\n[guarantees]\nE = {number}\n"
 
 
+def tune_spec(factory=LINEAR, params="{}", number="1.0", top=""):
+    return (
+        f'{top}name = "bad"\n[system]\nfactory = {factory}\nfixed = {params}\n'
+        '[parameters]\neps = { low = 0.001, high = 0.1, log = true, per = "scalar" }\n'
+        '[budget]\nkind = "simulated"\nerror = 1.0\n'
+        "[initial_states]\nlow = [-1.0, -1.0]\nhigh = [1.0, 1.0]\nruns = 1\nseed = 0\n"
+        f"[horizon]\nt_end = {number}\n"
+    )
+
+
 def deployment_spec(factory=LINEAR, params="{}", number="1.0", top=""):
     return (
         f'{top}name = "bad"\n[system]\nfactory = {factory}\nparams = {params}\n'
@@ -66,6 +76,7 @@ COMMANDS = {
     "sweep": (sweep_spec, ["--executor", "serial"], "horizon.t_end"),
     "compare": (compare_spec, ["--executor", "serial", "--no-plot"], "horizon.t_end"),
     "check": (check_spec, [], "guarantees.E"),
+    "tune": (tune_spec, ["--executor", "serial", "--no-plot", "--trials", "1"], "horizon.t_end"),
     "serve": (deployment_spec, ["--epoch", "1000.0"], "runtime.duration"),
     "sensor": (deployment_spec, ["--node", "0", "--epoch", "1000.0"], "runtime.duration"),
 }
@@ -208,6 +219,10 @@ ARGUMENT_CASES = [
     (["compare", "SPEC", "--out", "SPEC"], r"argument --out: must be a folder"),
     (["check"], r"etobs check: error: the following arguments are required: SPEC"),
     (["check", "SPEC", "--colour"], r"unrecognized arguments: --colour"),
+    (["tune"], r"etobs tune: error: the following arguments are required: SPEC"),
+    (["tune", "SPEC", "--trials", "0"], r"argument --trials: must be a positive integer; got '0'"),
+    (["tune", "SPEC", "--out", "SPEC"], r"argument --out: must be a folder"),
+    (["tune", "SPEC", "--executor", "gpu"], r"argument --executor: invalid choice: 'gpu'"),
     (["sensor", "SPEC", "--epoch", "1.0"], r"the following arguments are required: --node"),
     (["sensor", "SPEC", "--node", "first", "--epoch", "1.0"], r"argument --node: invalid int value: 'first'"),
     (["demo", "robot-arm", "--t-end", "nan"], r"argument --t-end: must be a finite number > 0; got 'nan'"),

@@ -104,11 +104,11 @@ def _execution(
 ) -> Iterator[dict[str, Any]]:
     """The executor settings for every batch, with one process pool or Dask client for all of them."""
     if executor == "process":
-        holder = {"pool": process_pool(workers)}
+        execution = {"executor": "process", "workers": workers, "pool": process_pool(workers)}
         try:
-            yield {"executor": "process", "workers": workers, "pool": _PoolRef(holder, workers)}
-        finally:
-            holder["pool"].shutdown(wait=True, cancel_futures=True)
+            yield execution
+        finally:  # the pool in use at the end (a broken one was replaced between batches)
+            execution["pool"].shutdown(wait=True, cancel_futures=True)
     elif executor == "dask" and client is None and scheduler:
         from dask.distributed import Client
 
@@ -122,17 +122,6 @@ def _execution(
             own.close()
     else:
         yield {"executor": executor, "workers": workers, "scheduler": scheduler, "client": client}
-
-
-class _PoolRef:
-    """The tuning's process pool, replaced when a worker's death broke it (``usable_pool``)."""
-
-    def __init__(self, holder: dict[str, Any], workers: int | None) -> None:
-        self.holder, self.workers = holder, workers
-
-    def __getattr__(self, name: str) -> Any:
-        self.holder["pool"] = usable_pool(self.holder["pool"], self.workers)
-        return getattr(self.holder["pool"], name)
 
 
 def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any:
@@ -241,6 +230,8 @@ class _Loop:
         from optuna.trial import TrialState
 
         spec, ev = self.spec, self.ev
+        if "pool" in ev.execution:  # a worker that died broke the pool: a new one for this batch
+            ev.execution["pool"] = usable_pool(ev.execution["pool"], ev.execution["workers"])
         frozen = {t.number: t for t in self.study.get_trials(deepcopy=False) if t.number in set(numbers)}
         cands = []
         for n in numbers:

@@ -1,0 +1,57 @@
+"""A process pool kept across calls (the trials of a tuning): the same records, and a broken one replaced."""
+
+import os
+from concurrent.futures.process import BrokenProcessPool
+
+import pytest
+
+from etobs.experiments.executors import execute, process_pool, usable_pool
+from etobs.experiments.runner import Task
+
+
+def tasks(spec):
+    return [Task(key="k", group=g, runs=(0, 1)) for g in range(spec.n_groups)]
+
+
+def collect(spec, **how):
+    got, failed = {}, []
+    execute(
+        tasks(spec),
+        type(spec),
+        spec.raw,
+        lambda t, r: got.setdefault(t.group, r),
+        lambda t, m: failed.append(t),
+        **how,
+    )
+    assert not failed
+    return got
+
+
+def test_a_kept_pool_gives_the_records_of_a_fresh_one_call_after_call(tiny):
+    fresh = collect(tiny, executor="process", workers=1)
+    pool = process_pool(1)
+    try:
+        for _ in range(2):  # the same pool serves two calls
+            kept = collect(tiny, executor="process", workers=1, pool=pool)
+            assert [[r["transmissions"] for r in kept[g]] for g in kept] == [
+                [r["transmissions"] for r in fresh[g]] for g in kept
+            ]
+            assert {g: [r["error"] for r in recs] for g, recs in kept.items()} == {
+                g: [r["error"] for r in recs] for g, recs in fresh.items()
+            }
+    finally:
+        pool.shutdown()
+
+
+def test_a_pool_a_dead_worker_broke_is_replaced_and_its_calls_still_finish(tiny):
+    pool = process_pool(1)
+    with pytest.raises(BrokenProcessPool):
+        pool.submit(os._exit, 3).result()  # the worker dies: the pool is broken for good
+    # a call given the broken pool reruns its chunks on fresh pools: every chunk is reported
+    assert sorted(collect(tiny, executor="process", workers=1, pool=pool)) == list(range(tiny.n_groups))
+    new = usable_pool(pool, 1)
+    try:
+        assert new is not pool and new.submit(int).result() == 0
+        assert usable_pool(new, 1) is new  # a working pool is kept
+    finally:
+        new.shutdown()
