@@ -135,15 +135,10 @@ def _fmt(x: Any) -> str:
 
 def _plot(result: Any) -> None:
     try:
-        import matplotlib
+        from etobs.plot import plot_front
+
+        fig, _ = plot_front(result)
     except ImportError:  # the plot extra is not installed: the tables are written all the same
         print("note: matplotlib is not installed (pip install 'etobs[plot]'): no front.png")
         return
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from etobs.plot import plot_front
-
-    fig, _ = plot_front(result)
     fig.savefig(result.out / "front.png", dpi=130)
-    plt.close(fig)

@@ -21,6 +21,7 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     horizontal line. Lower left is better.
     """
     fig, axes = _figure(1, 4.6)
+    fig.set_figwidth(fig.get_figwidth() * 1.35)  # room for the legend on the right
     ax = axes[0]
 
     def pts(rows: list[dict[str, Any]], x: str = "transmissions_rate", y: str = "error") -> tuple[list, list]:
@@ -62,15 +63,17 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
                 ax.plot([r["transmissions_rate"], hx], [r["error"], hy], color="C3", lw=0.6, alpha=0.6)
                 ax.plot(hx, hy, "s", mfc="none", color="C3", ms=6)
         ax.plot([], [], "s", mfc="none", color="C3", label="front on held-out runs")
+    colors = ["C1", "C2", "C4", "C5", "C6", "C8", "C9"]  # not C0 (feasible) nor C3 (the front)
     for k, r in enumerate(result.references):
         if _finite(r.get("transmissions_rate")) and _finite(r.get("error")):
-            marker = "*" if r["name"] == "start" else "D"
+            star = r["name"] == "start"
             ax.plot(
                 r["transmissions_rate"],
                 r["error"],
-                marker,
-                color=f"C{(k + 1) % 10}",
-                ms=11 if marker == "*" else 7,
+                "*" if star else "D",
+                color=colors[k % len(colors)],
+                ms=13 if star else 7,
+                mec="k",
                 ls="none",
                 label=f"{r['name']}{'' if r.get('certified') else ' (not certified)'}",
             )
@@ -82,7 +85,7 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     ax.set_xlabel("transmissions per node and second (mean over runs)")
     ax.set_ylabel("simulated error statistic")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize="small", loc="best")
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.suptitle(
         f"Tuning {result.summary.get('name', '')}: {len(result.trials)} trials, "
         f"{len(result.front)} on the front"
