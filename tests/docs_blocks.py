@@ -9,6 +9,7 @@ would; what they print goes to stdout and the namespace is returned for checks.
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -37,3 +38,18 @@ def run_python_blocks(page: Path, folder: Path | None = None) -> dict[str, Any]:
         if name is None:
             exec(compile(code, str(page), "exec"), namespace)
     return namespace
+
+
+def run_page_in(page: Path, folder: Path, monkeypatch: Any, modules: tuple[str, ...]) -> dict[str, Any]:
+    """Run ``page`` in ``folder`` as a reader would: it is the working folder and importable.
+
+    The page's file blocks (``modules``, imported by its other blocks) are forgotten after,
+    so that another test's module of the same name is not taken for them.
+    """
+    monkeypatch.chdir(folder)
+    monkeypatch.syspath_prepend(str(folder))
+    try:
+        return run_python_blocks(page, folder)
+    finally:
+        for name in modules:
+            sys.modules.pop(name, None)

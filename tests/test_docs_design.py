@@ -1,7 +1,6 @@
 """docs/design.md's end-to-end example runs as written, and `etobs check` on its spec agrees."""
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +10,7 @@ pytest.importorskip("cvxpy")
 
 from etobs.cli.main import main
 from etobs.estimation import min_inter_event_time
-from tests.docs_blocks import run_python_blocks
+from tests.docs_blocks import run_page_in
 
 PAGE = Path(__file__).parents[1] / "docs" / "design.md"
 
@@ -19,12 +18,7 @@ PAGE = Path(__file__).parents[1] / "docs" / "design.md"
 def test_design_page_runs_from_matrices_to_a_checked_certificate_and_a_simulation(
     tmp_path, monkeypatch, capsys
 ):
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.syspath_prepend(str(tmp_path))  # the page imports the chain.py it has the reader save
-    try:
-        ns = run_python_blocks(PAGE, tmp_path)
-    finally:
-        sys.modules.pop("chain", None)
+    ns = run_page_in(PAGE, tmp_path, monkeypatch, ("chain",))  # the page imports the chain.py it saves
     out = capsys.readouterr().out
     cert, result = ns["cert"], ns["result"]
     assert cert.ok and "certificate: all conditions hold" in out

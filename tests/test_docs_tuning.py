@@ -1,6 +1,5 @@
 """docs/tuning.md's pendulum runs as written: propose_rules' design, a certified budget, a tuning."""
 
-import sys
 from pathlib import Path
 
 import pytest
@@ -8,7 +7,7 @@ import pytest
 pytest.importorskip("cvxpy")
 pytest.importorskip("optuna")
 
-from tests.docs_blocks import run_python_blocks
+from tests.docs_blocks import run_page_in
 
 PAGE = Path(__file__).parents[1] / "docs" / "tuning.md"
 
@@ -17,12 +16,7 @@ PAGE = Path(__file__).parents[1] / "docs" / "tuning.md"
 def test_the_pendulum_of_the_tuning_page_runs_and_stays_within_the_certified_budget(
     tmp_path, monkeypatch, capsys
 ):
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.syspath_prepend(str(tmp_path))  # the page imports the pendulum.py it has the reader save
-    try:
-        ns = run_python_blocks(PAGE, tmp_path)
-    finally:
-        sys.modules.pop("pendulum", None)
+    ns = run_page_in(PAGE, tmp_path, monkeypatch, ("pendulum",))  # the page imports the pendulum.py it saves
     out = capsys.readouterr().out
     result = ns["result"]
     assert "of which the disturbance alone is 51% of its square" in out
