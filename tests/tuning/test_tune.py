@@ -282,3 +282,15 @@ def test_the_observer_is_a_variable_of_the_search_with_two_observers(tmp_path, c
             for name, g in ev.gains.items()
         }
         assert stored == {name: 4 if name == r["observer"] else 0 for name in ev.gains}
+
+
+def test_the_same_trials_on_a_dask_cluster_and_in_this_process(tmp_path, dask_cluster):
+    from dask.distributed import Client
+
+    raw = raw_tune(search={**BASE["search"], "trials": 6})
+    serial = tune(parse_tune_spec(raw), tmp_path / "serial", executor="serial", progress=False)
+    with Client(dask_cluster) as client:
+        dask = tune(parse_tune_spec(raw), tmp_path / "dask", executor="dask", client=client, progress=False)
+    key = lambda rows: [(r["trial"], r["state"], r["transmissions_rate"], r["error"]) for r in rows]  # noqa: E731
+    assert key(dask.trials) == key(serial.trials)
+    assert front_of(dask) == front_of(serial)
