@@ -294,3 +294,23 @@ def test_the_same_trials_on_a_dask_cluster_and_in_this_process(tmp_path, dask_cl
     key = lambda rows: [(r["trial"], r["state"], r["transmissions_rate"], r["error"]) for r in rows]  # noqa: E731
     assert key(dask.trials) == key(serial.trials)
     assert front_of(dask) == front_of(serial)
+
+
+def test_two_output_folders_share_one_study_through_a_storage_url(tmp_path):
+    import optuna
+
+    url = f"sqlite:///{tmp_path / 'shared.db'}"
+    raw = raw_tune(search={**BASE["search"], "trials": 4})
+    first = tune(parse_tune_spec(raw), tmp_path / "a", executor="serial", progress=False, storage=url)
+    assert len(first.trials) == 4 and not (tmp_path / "a" / "study.db").exists()
+    # another machine's trial, asked and still running: not this one's to evaluate
+    study = optuna.load_study(study_name="arm", storage=url)
+    other = study.ask()
+    other.set_user_attr("worker", "elsewhere:/out")
+    second = tune(
+        parse_tune_spec(raw), tmp_path / "b", trials=8, executor="serial", progress=False, storage=url
+    )
+    states = [r["state"] for r in second.trials]
+    assert len(states) == 8 and states[4] == "running"  # counted, left to its machine
+    assert [r["trial"] for r in second.trials[:4]] == [r["trial"] for r in first.trials]
+    assert all(s in ("complete", "pruned") for i, s in enumerate(states) if i != 4)

@@ -32,7 +32,7 @@ class TrialRow:
     row: dict[str, Any]
 
     @classmethod
-    def of(cls, trial: Any, spec: TuneSpec, n_nodes: int) -> TrialRow:
+    def of(cls, trial: Any) -> TrialRow:
         """The row of an Optuna trial told by :func:`~etobs.tuning.tune.tune`."""
         a = {
             **trial.user_attrs.get("etobs", {}),
@@ -118,7 +118,7 @@ class TuningResult:
 
 def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
     """Collect the trials, validate the front on held-out runs, write the tables and specs."""
-    rows = [TrialRow.of(t, spec, ev.n_nodes).row for t in study.get_trials(deepcopy=False)]
+    rows = [TrialRow.of(t).row for t in study.get_trials(deepcopy=False)]
     feasible = [r for r in rows if r["feasible"]]
     idx = pareto([(r["transmissions_rate"], r["error"]) for r in feasible])
     front = sorted(
@@ -144,7 +144,7 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
         r["holdout_over_budget"] = fig is None or not fig.error <= spec.budget.error
         r["check_spec"], r["sweep_spec"] = _export(spec, ev, specs, f"front-{k:02d}", kw, obs)
     write_table(out, "trials", rows)
-    write_table(out, "front", front or [{"trial": None}])
+    write_table(out, "front", front)
     write_table(out, "references", ref_rows)
     saved = int(study.user_attrs.get("saved_runs", 0))
     summary = {

@@ -136,7 +136,7 @@ def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any
         )
     except (ValueError, ImportError) as exc:  # a malformed URL, a database driver not installed
         raise InputError(f"`storage` {url!r} cannot hold the study: {exc}") from exc
-    ident = _identity(spec, ev)
+    ident = _identity(spec)
     had = study.user_attrs.get("etobs_tuning")
     if had is None:
         study.set_user_attr("etobs_tuning", ident)
@@ -155,7 +155,7 @@ def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any
     return study
 
 
-def _identity(spec: TuneSpec, ev: Evaluator) -> str:
+def _identity(spec: TuneSpec) -> str:
     """A hash of what determines every trial's numbers (all but the number of trials)."""
     raw = {k: v for k, v in spec.raw.items() if k not in ("search", "validation", "references")}
     raw["search"] = {k: v for k, v in spec.raw.get("search", {}).items() if k != "trials"}
@@ -298,7 +298,7 @@ class _Loop:
                 trial.set_constraint(k, float(x))
             self.study.tell(n, values, state=state)
             if self.on_trial is not None:
-                self.on_trial(TrialRow.of(self.study.trials[n], spec, ev.n_nodes))
+                self.on_trial(TrialRow.of(self.study.trials[n]))
         if saved:
             self._saved(saved)
         return len(cands)
