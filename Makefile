@@ -27,6 +27,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_user_model.py --quick
 	$(BIN)/python benchmarks/bench_extensions.py --quick
 	$(BIN)/python benchmarks/bench_model_cost.py --quick
+	$(BIN)/python benchmarks/bench_tune.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -40,6 +41,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_user_model.py
 	$(BIN)/python benchmarks/bench_extensions.py
 	$(BIN)/python benchmarks/bench_model_cost.py
+	$(BIN)/python benchmarks/bench_tune.py
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis
