@@ -3,6 +3,7 @@
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -140,12 +141,14 @@ def test_pruned_candidates_broke_the_budget_by_the_margin_on_their_first_runs(tm
     raw = raw_tune(
         budget={"kind": "simulated", "error": 6.0},
         search={**BASE["search"], "trials": 12, "prune_share": 0.5, "prune_z": 1.0},
+        initial_states={**BASE["initial_states"], "runs": 10},
     )
     res = tune(parse_tune_spec(raw), tmp_path, executor="serial", progress=False)
     pruned = [r for r in res.trials if r["evaluated"] == "pruned"]
     assert pruned, "the budget must prune some candidates for this test to mean anything"
+    assert res.saved_runs == 5 * len(pruned)
     for r in pruned:
-        assert r["runs"] == 2  # half of 4
+        assert r["runs"] == 5  # half of 10
         # over the budget by one standard error of its two runs' mean, or then beaten by the front:
         # the feasible trials of the batches before its own (batches of 4), less one standard error
         before = [
@@ -157,7 +160,22 @@ def test_pruned_candidates_broke_the_budget_by_the_margin_on_their_first_runs(tm
         assert err > 6.0 or any(p[0] <= tx and p[1] <= err for p in before)
     for r in res.trials:
         if r["evaluated"] == "full":
-            assert r["runs"] == 4
+            assert r["runs"] == 10
+
+
+def test_no_candidate_is_pruned_on_fewer_than_five_runs(tmp_path):
+    # the same tuning on 9 runs: a first share of 4.5 -> 5 runs may prune, of 8 -> 4 runs may not
+    raw = raw_tune(
+        budget={"kind": "simulated", "error": 6.0},
+        search={**BASE["search"], "trials": 8, "prune_share": 0.5, "prune_z": 1.0},
+        initial_states={**BASE["initial_states"], "runs": 9},
+    )
+    five = tune(parse_tune_spec(raw), tmp_path / "five", executor="serial", progress=False)
+    assert any(r["evaluated"] == "pruned" and r["runs"] == 5 for r in five.trials)
+    raw["initial_states"]["runs"] = 8
+    four = tune(parse_tune_spec(raw), tmp_path / "four", executor="serial", progress=False)
+    assert all(r["evaluated"] == "full" and r["runs"] == 8 for r in four.trials)
+    assert four.saved_runs == 0
 
 
 def test_another_tuning_in_the_same_folder_is_refused(tmp_path):
@@ -168,20 +186,43 @@ def test_another_tuning_in_the_same_folder_is_refused(tmp_path):
         tune(other, tmp_path, executor="serial", progress=False)
 
 
-def test_a_budget_no_candidate_meets_is_one_line(tmp_path, capsys):
-    path = tmp_path / "tune.toml"
-    raw = raw_tune(budget={"kind": "simulated", "error": 1e-6}, search={**BASE["search"], "trials": 4})
+@pytest.mark.parametrize(
+    ("over", "says"),
+    [
+        (
+            {"budget": {"kind": "simulated", "error": 1e-6}},
+            r"trial (\d+): its error [\d.]+ is over the budget 1e-06",
+        ),
+        (
+            {"budget": {"kind": "certified", "error": 1e-9}},
+            r"trial (\d+): its certified bound [\d.e+]+ is over the budget 1e-09",
+        ),
+        (
+            {"constraints": {"tau_min": 100.0}},
+            r"trial (\d+): its tau_i \([\d., ]+ s\) fall short of constraints.tau_min",
+        ),
+    ],
+    ids=["simulated budget", "certified budget", "tau_min"],
+)
+def test_a_budget_no_candidate_meets_is_one_line(over, says, tmp_path, capsys):
     import tomli_w
 
-    path.write_text(tomli_w.dumps(raw))
+    path = tmp_path / "tune.toml"
+    path.write_text(tomli_w.dumps(raw_tune(**over, search={**BASE["search"], "trials": 4})))
     code = main(["tune", str(path), "--out", str(tmp_path / "o"), "--executor", "serial", "--no-plot"])
     out = capsys.readouterr()
     assert code == 1
     assert out.err.count("\n") == 1
     assert out.err.startswith(
-        "etobs: no candidate of 4 met every constraint: the certified candidate nearest"
+        "etobs: no candidate of 4 met every constraint: the certified candidate nearest, "
     )
-    assert "against the budget 1e-06 (budget.error)" in out.err
+    found = re.search(says, out.err)
+    assert found, out.err
+    # the nearest: the certified trial that misses its constraints by the least
+    rows = pd.read_csv(tmp_path / "o" / "trials.csv")
+    rows = rows[rows.certified]
+    missed = rows.filter(like="constraint_").clip(lower=0).fillna(0).sum(axis=1)
+    assert int(found[1]) == int(rows.trial[missed.idxmin()])
 
 
 KILLER = """
@@ -314,3 +355,86 @@ def test_two_output_folders_share_one_study_through_a_storage_url(tmp_path):
     assert len(states) == 8 and states[4] == "running"  # counted, left to its machine
     assert [r["trial"] for r in second.trials[:4]] == [r["trial"] for r in first.trials]
     assert all(s in ("complete", "pruned") for i, s in enumerate(states) if i != 4)
+
+
+@pytest.mark.parametrize(
+    ("over", "message"),
+    [
+        (
+            {"guarantees": {"E": [30.0], "noise": [0.0, 0.01], "disturbance": 0.0283}},
+            r"the start design \(the factory with `system.fixed`\) cannot be certified: `guarantees.E` must be one bound "
+            r"or one per node \(2\); got 1",
+        ),
+        (
+            {"constraints": {"tau_min": [0.01, 0.01, 0.01]}},
+            r"`constraints.tau_min` must be one number or one per node \(2\); got 3",
+        ),
+    ],
+    ids=["E of the wrong length", "tau_min of the wrong length"],
+)
+def test_a_mistake_seen_only_when_certifying_is_refused_before_any_trial(over, message, tmp_path):
+    spec = parse_tune_spec(raw_tune(**over))
+    with pytest.raises(InputError, match=message):
+        tune(spec, tmp_path, executor="serial", progress=False)
+    assert not (tmp_path / "study.db").exists()  # nothing asked: fixed, the spec runs in this folder
+
+
+def test_a_factory_that_needs_a_searched_argument_is_told_to_give_it_a_default(tmp_path):
+    factory = tmp_path / "needs.py"
+    factory.write_text(
+        "import etobs\nfrom etobs.examples import robot_arm\n\n\n@etobs.factory\n"
+        "def arm(eps, noise=True):\n    return robot_arm(eps=eps, noise=noise)\n"
+    )
+    raw = raw_tune(
+        system={"factory": f"{factory}:arm", "fixed": {}},
+        parameters={"eps": BASE["parameters"]["eps"]},
+        references=[],
+    )
+    spec = parse_tune_spec(raw)
+    with pytest.raises(
+        InputError, match=r"the factory .* needs `eps`, which `parameters` searches: .* default"
+    ):
+        tune(spec, tmp_path / "o", executor="serial", progress=False)
+
+
+def test_a_storage_that_cannot_hold_the_study_is_one_error(tmp_path):
+    spec = parse_tune_spec(raw_tune())
+    with pytest.raises(InputError, match=r"`storage` \(--storage\) 'foo://bar' cannot hold the study"):
+        tune(spec, tmp_path, executor="serial", progress=False, storage="foo://bar")
+
+
+def test_a_shared_study_resumes_a_trial_killed_between_its_ask_and_its_mark(tmp_path):
+    import socket
+
+    import optuna
+
+    url = f"sqlite:///{tmp_path / 'shared.db'}"
+    raw = raw_tune(search={**BASE["search"], "trials": 4}, references=[])
+    whole = tune(parse_tune_spec(raw), tmp_path / "whole", executor="serial", progress=False)
+    # what a kill leaves between ask and the worker mark: the intent, then a running trial unmarked
+    tune(parse_tune_spec(raw), tmp_path / "b", trials=1, executor="serial", progress=False, storage=url)
+    study = optuna.load_study(study_name="arm", storage=url)
+    study.set_user_attr(f"asking:{socket.gethostname()}:{(tmp_path / 'b').resolve()}", 1)
+    from etobs.tuning.space import distributions
+    from etobs.tuning.tune import _seed
+
+    study.sampler = optuna.samplers.TPESampler(seed=_seed(3, 1), n_startup_trials=4, multivariate=True)
+    study.ask(distributions(parse_tune_spec(raw), 2))
+    resumed = tune(parse_tune_spec(raw), tmp_path / "b", executor="serial", progress=False, storage=url)
+    assert [r["state"] for r in resumed.trials] == [r["state"] for r in whole.trials]
+    assert [r["trial"] for r in resumed.trials] == [0, 1, 2, 3]
+    assert all(r["state"] in ("complete", "pruned") for r in resumed.trials)
+
+
+def test_the_front_plot_draws_what_it_says(wide):
+    pytest.importorskip("matplotlib")
+    from etobs.plot import plot_front
+
+    fig, ax = plot_front(wide)
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert f"front ({len(wide.front)})" in labels
+    assert "budget 12" in labels
+    full = [r for r in wide.trials if r["evaluated"] == "full" and not r["certified"]]
+    assert f"not certified ({len(full)})" in labels
+    assert "sigma*c > 1 (not certified)" in labels and "row 8" in labels
+    assert f"{len(wide.trials)} trials, {len(wide.front)} on the front" in fig._suptitle.get_text()

@@ -81,23 +81,37 @@ def run(args: argparse.Namespace) -> int:
 
 
 def no_front(result: Any) -> str:
-    """Why no point is on the front, in one line: the nearest candidate and what it missed."""
-    sim = [r for r in result.trials if r["evaluated"] in ("full", "pruned") and r["error"] is not None]
+    """Why no point is on the front, in one line: the certified candidate nearest, and what it missed."""
     head = f"no candidate of {len(result.trials)} met every constraint"
-    if not sim:
-        return f"{head}: none was simulated (each failed the certificate; see cert_failures in trials.csv)"
-    certified = [r for r in sim if r["certified"]]
+    certified = [r for r in result.trials if r["certified"]]
     if not certified:
-        return f"{head}: none of the {len(sim)} simulated was certified (see cert_failures in trials.csv)"
-    what = "error_bound" if result.budget_kind == "certified" else "error"
-    best = min((r for r in certified if r.get(what) is not None), key=lambda r: r[what], default=None)
-    if best is None:
-        return f"{head} (see the constraint_* columns of trials.csv)"
-    part = " on its first runs (pruned)" if best["evaluated"] == "pruned" else ""
+        return f"{head}: none was certified (see cert_failures in trials.csv)"
+
+    def missed(r: dict[str, Any]) -> dict[str, float]:
+        cons = {k[len("constraint_") :]: v for k, v in r.items() if k.startswith("constraint_")}
+        return {k: v for k, v in cons.items() if v is not None and v > 0}
+
+    near = min(certified, key=lambda r: (sum(missed(r).values()), r["trial"]))
+    what = []
+    for k in missed(near):
+        if k == "budget" and result.budget_kind == "certified":
+            what.append(
+                f"its certified bound {near['error_bound']:.4g} is over the budget {result.budget:.4g}"
+            )
+        elif k == "budget":
+            runs = " on its first runs (pruned)" if near["evaluated"] == "pruned" else ""
+            what.append(f"its error{runs} {near['error']:.4g} is over the budget {result.budget:.4g}")
+        elif k == "tau_min":
+            taus = ", ".join(
+                f"{v:.4g}" for kk, v in near.items() if kk.startswith("tau_node") and v is not None
+            )
+            what.append(f"its tau_i ({taus} s) fall short of constraints.tau_min")
+        else:
+            what.append(f"{near['runs'] - near['completed']} of its runs stopped early")
     return (
-        f"{head}: the certified candidate nearest the budget, trial {best['trial']}, has{part} "
-        f"{'certified bound' if what == 'error_bound' else 'error'} {best[what]:.4g} against the budget "
-        f"{result.budget:.4g} (budget.error): raise it, widen the boxes, or add trials"
+        f"{head}: the certified candidate nearest, trial {near['trial']}: {'; '.join(what) or 'see its row'} "
+        "(a constraint_* column above 0 in trials.csv is one a trial misses: widen the boxes, add "
+        "trials or ease that constraint)"
     )
 
 

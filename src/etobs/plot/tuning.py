@@ -15,17 +15,19 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     """Every simulated trial, the feasible front, the start design and the references.
 
     Feasible trials (certified, within the budget and every constraint) are filled;
-    the others (not certified, over the budget or pruned) are grey or hollow, the pruned
-    ones at their figures on the first share of runs. The front is a step line; each
-    front point's held-out figures are joined to it by a thin line. The budget is a
-    horizontal line. Lower left is better.
+    the others (not certified, over the budget or pruned) are grey, the pruned ones at
+    their figures on the first share of runs. The front is a step line; each front
+    point's held-out figures are joined to it by a thin line. A simulated budget is a
+    horizontal line, a certified one (it bounds the certificate's error bound, not the
+    simulated error on the axis) is in the title. Lower left is better.
     """
     fig, axes = _figure(1, 4.6)
     fig.set_figwidth(fig.get_figwidth() * 1.35)  # room for the legend on the right
     ax = axes[0]
 
     def pts(rows: list[dict[str, Any]], x: str = "transmissions_rate", y: str = "error") -> tuple[list, list]:
-        keep = [r for r in rows if _finite(r.get(x)) and _finite(r.get(y))]
+        # on log axes a point at 0 (a design that sent nothing) cannot be drawn: it is not counted
+        keep = [r for r in rows if _shown(r.get(x), log) and _shown(r.get(y), log)]
         return [r[x] for r in keep], [r[y] for r in keep]
 
     groups = [
@@ -59,13 +61,13 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
         ax.plot(x, y, "o", color="C3", ms=7)
         for r in result.front:
             hx, hy = r.get("holdout_transmissions_rate"), r.get("holdout_error")
-            if _finite(hx) and _finite(hy):
+            if _shown(hx, log) and _shown(hy, log):
                 ax.plot([r["transmissions_rate"], hx], [r["error"], hy], color="C3", lw=0.6, alpha=0.6)
                 ax.plot(hx, hy, "s", mfc="none", color="C3", ms=6)
         ax.plot([], [], "s", mfc="none", color="C3", label="front on held-out runs")
     colors = ["C1", "C2", "C4", "C5", "C6", "C8", "C9"]  # not C0 (feasible) nor C3 (the front)
     for k, r in enumerate(result.references):
-        if _finite(r.get("transmissions_rate")) and _finite(r.get("error")):
+        if _shown(r.get("transmissions_rate"), log) and _shown(r.get("error"), log):
             star = r["name"] == "start"
             ax.plot(
                 r["transmissions_rate"],
@@ -77,21 +79,31 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
                 ls="none",
                 label=f"{r['name']}{'' if r.get('certified') else ' (not certified)'}",
             )
-    what = "certified error bound" if result.budget_kind == "certified" else "budget"
-    ax.axhline(result.budget, color="k", ls="--", lw=0.8, label=f"{what} {result.budget:.4g}")
+    if result.budget_kind == "simulated":  # a certified budget bounds another figure: in the title
+        ax.axhline(result.budget, color="k", ls="--", lw=0.8, label=f"budget {result.budget:.4g}")
     if log:
+        from matplotlib.ticker import NullFormatter
+
         ax.set_xscale("log")
         ax.set_yscale("log")
+        for axis in (ax.xaxis, ax.yaxis):  # the minor labels of a short log axis overlap
+            axis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("transmissions per node and second (mean over runs)")
     ax.set_ylabel("simulated error statistic")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    budget = f"; certified bound <= {result.budget:.4g}" if result.budget_kind == "certified" else ""
     fig.suptitle(
         f"Tuning {result.summary.get('name', '')}: {len(result.trials)} trials, "
-        f"{len(result.front)} on the front"
+        f"{len(result.front)} on the front{budget}"
     )
     return fig, ax
 
 
 def _finite(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _shown(x: Any, log: bool) -> bool:
+    """Whether ``x`` can be drawn: finite, and positive on a log axis."""
+    return _finite(x) and (x > 0 or not log)

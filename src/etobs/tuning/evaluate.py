@@ -63,6 +63,7 @@ class SimulatedFigures:
     error_mean: float
     transmissions_se: float = 0.0
     error_se: float = 0.0
+    node_rates: tuple[float, ...] = ()
 
 
 class Evaluator:
@@ -72,8 +73,20 @@ class Evaluator:
         self.spec = spec
         self.store = store
         self.execution = execution
+        needed = _required(spec)
+        if needed:
+            raise SpecError(
+                f"the factory {spec.factory!r} needs `{needed[0]}`, which `parameters` searches: the start "
+                "design is the factory called with `system.fixed` alone, so give the argument a default "
+                "(the start design's value) in the factory"
+            )
         start = make_problem(spec.factory, spec.fixed, "system.fixed")
         self.n_nodes = len(start.nodes)
+        if isinstance(spec.tau_min, tuple) and len(spec.tau_min) != self.n_nodes:
+            raise SpecError(
+                f"`constraints.tau_min` must be one number or one per node ({self.n_nodes}); "
+                f"got {len(spec.tau_min)}"
+            )
         self.takes_L = "L" in inspect.signature(resolve_factory(spec.factory)).parameters
         # the ISS gains of each observer, computed once (an LMI design is a convex program)
         self.gains: dict[str, tuple[Any, list[list[float]], list[str]]] = {}
@@ -89,6 +102,15 @@ class Evaluator:
         problem = start if first is None else self._problem({}, first)
         # E depends on the plant alone: estimated (or read) once, for every candidate
         self.E = rate_bound(problem, spec.guarantees)
+        # the start design's certificate, strictly: a mistake of `[guarantees]` (an E of the
+        # wrong length, a disturbance below the problem's) is the spec's, not every candidate's
+        iss = None if first is None else self.gains[first][0]
+        try:
+            certify_with(problem, iss, spec.guarantees, E=self.E)
+        except InputError as exc:
+            raise SpecError(
+                f"the start design (the factory with `system.fixed`) cannot be certified: {exc}"
+            ) from exc
 
     def sim_kwargs(self, kwargs: dict[str, Any], observer: str | None) -> dict[str, Any]:
         """The factory's arguments a candidate is simulated with (its observer's ``L`` added).
@@ -192,6 +214,13 @@ class Evaluator:
             # which stands for a quantile's too), for pruning on the first runs
             transmissions_se=_se(counts) / (nodes * self.spec.window) if self.spec.window > 0 else 0.0,
             error_se=_se(errors),
+            # each node's own rate: a design that silences a node shows it here
+            node_rates=tuple(
+                float(np.mean([r["transmissions"][i] for r in records])) / self.spec.window
+                if self.spec.window > 0
+                else math.inf
+                for i in range(nodes)
+            ),
         )
 
     def budget_constraint(self, fig: SimulatedFigures) -> dict[str, float]:
@@ -201,6 +230,17 @@ class Evaluator:
             b = self.spec.budget.error
             cons["budget"] = (fig.error - b) / b if math.isfinite(fig.error) else 1.0
         return cons
+
+
+def _required(spec: TuneSpec) -> list[str]:
+    """The searched arguments the factory has no default for (the start design cannot be built)."""
+    params = inspect.signature(resolve_factory(spec.factory)).parameters
+    searched = {p.name for p in spec.parameters}
+    return [
+        k
+        for k, p in params.items()
+        if k in searched and k not in spec.fixed and p.default is inspect.Parameter.empty
+    ]
 
 
 def _se(values: list[float]) -> float:

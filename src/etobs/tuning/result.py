@@ -19,6 +19,7 @@ from typing import Any
 from etobs.experiments.store import atomic_write
 from etobs.experiments.tables import flatten_params, write_table
 from etobs.tuning.front import pareto
+from etobs.tuning.space import factory_kwargs, start_values
 from etobs.tuning.spec import TuneSpec
 
 #: Constraint names, in the tables' order (``constraint_NAME``: ``<= 0`` is met).
@@ -57,6 +58,10 @@ class TrialRow:
             error_mean=a.get("error_mean") if sim in ("full", "pruned") else None,
             transmissions_se=a.get("transmissions_se") if sim in ("full", "pruned") else None,
             error_se=a.get("error_se") if sim in ("full", "pruned") else None,
+            **{
+                f"transmissions_rate_node{i}": x
+                for i, x in enumerate(a.get("node_rates", []) if sim in ("full", "pruned") else [])
+            },
             runs=a.get("runs", 0),
             completed=a.get("completed", 0),
             certified=bool(a.get("cert_ok", False)),
@@ -67,9 +72,9 @@ class TrialRow:
         )
         for i, t in enumerate(a.get("tau", [])):
             row[f"tau_node{i}"] = t
-        for k in CONSTRAINTS:
+        for k in CONSTRAINTS:  # one not evaluated (a screened trial's budget) is blank
             if k in cons:
-                row[f"constraint_{k}"] = cons[k]
+                row[f"constraint_{k}"] = None if k in a.get("unevaluated", ()) else cons[k]
         row["feasible"] = full and trial.state.name == "COMPLETE" and all(v <= 0 for v in cons.values())
         return cls(row)
 
@@ -131,10 +136,12 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
     ]
     first_obs = next(iter(spec.observers), None)
     refs = [("start", {}, first_obs)] + [(r.name, r.params, first_obs) for r in spec.references]
-    ref_rows = _references(spec, ev, refs)
+    ref_rows = _references(spec, ev, [(name, _resolved(spec, ev, p), o) for name, p, o in refs])
     held = ev.simulate(cands, spec.validation_runs, seed=spec.validation_seed) if cands else []
     specs = out / "specs"
     specs.mkdir(exist_ok=True)
+    for old in specs.glob("front-*.toml"):  # an earlier front's: its numbers name other designs now
+        old.unlink()
     for k, (r, recs, (kw, obs)) in enumerate(zip(front, held, cands, strict=True)):
         fig = ev.figures(recs) if recs is not None else None
         r["holdout_runs"] = spec.validation_runs
@@ -146,7 +153,7 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
     write_table(out, "trials", rows)
     write_table(out, "front", front)
     write_table(out, "references", ref_rows)
-    saved = int(study.user_attrs.get("saved_runs", 0))
+    saved = sum(int(t.user_attrs.get("etobs", {}).get("saved_runs", 0)) for t in trials.values())
     summary = {
         "name": spec.name,
         "trials": len(rows),
@@ -160,6 +167,16 @@ def finish(spec: TuneSpec, ev: Any, study: Any, out: Path) -> TuningResult:
     }
     atomic_write(out / "tuning.json", json.dumps(summary, indent=2, default=_json) + "\n")
     return TuningResult(rows, front, ref_rows, out, spec.budget.kind, spec.budget.error, saved, summary)
+
+
+def _resolved(spec: TuneSpec, ev: Any, params: dict[str, Any]) -> dict[str, Any]:
+    """A known design's arguments as a trial of it has them (the same runs' key: not simulated twice).
+
+    The start design (``{}``) and a reference inside the search space are written as the
+    searched parameters; any other keeps its arguments as given.
+    """
+    values = start_values(spec, ev.n_nodes, params)
+    return params if values is None else factory_kwargs(spec, values, ev.n_nodes)
 
 
 def _references(

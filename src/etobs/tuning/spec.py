@@ -209,9 +209,11 @@ def parse_tune_spec(raw: dict[str, Any], *, folder: str | Path | None = None) ->
             raise SpecError(f"`objective.error_quantile` must be in (0, 1]; got {quantile!r}")
     refs = _references(top.get("references", []))
     names = {p.name for p in parameters}
-    calls = [("system.fixed", fixed)]
-    calls += [(f"references[{i}].params", {**fixed, **r.params}) for i, r in enumerate(refs)]
-    calls.append(("parameters", {**fixed, **{n: None for n in names if n != OBSERVER_VARIABLE}}))
+    # with every searched argument (a value stands for each): a factory that needs one is
+    # told apart by the start design, which is the factory with `system.fixed` alone
+    searched = {n: None for n in names if n != OBSERVER_VARIABLE}
+    calls = [("parameters", {**fixed, **searched})]
+    calls += [(f"references[{i}].params", {**fixed, **searched, **r.params}) for i, r in enumerate(refs)]
     check_arguments(factory, calls)
     if len(observers) > 1 and "L" in fixed:  # with one observer, the certificate compares the two
         raise SpecError(

@@ -31,6 +31,10 @@ from etobs.tuning.result import TrialRow, TuningResult, finish
 from etobs.tuning.space import distributions, factory_kwargs, observer_of, start_values
 from etobs.tuning.spec import TuneSpec, load_tune_spec
 
+#: The worker of a tuning on its own folder's study (every unfinished trial there is its own).
+LOCAL = "local"
+#: Fewest first runs a candidate may be pruned on: a standard error needs a few.
+MIN_PRUNE_RUNS = 5
 #: The user attribute of a trial that holds its figures (one write to the storage).
 ATTR = "etobs"
 #: Directions of the two objectives: transmissions per node and second, error.
@@ -84,15 +88,17 @@ def tune(
     if isinstance(total, bool) or not isinstance(total, int) or total < 1:
         raise InputError(f"`trials` must be a positive integer; got {trials!r}")
     check_execution(executor, workers)
-    out = Path(out)
+    out = Path(out).resolve()  # the tables name the exported specs by absolute path
     out.mkdir(parents=True, exist_ok=True)
     store = ResultStore(out / "runs")
     with store.lock(), _execution(executor, workers, scheduler, client) as execution:
         store.clean_temporary()
-        atomic_write(out / "spec.json", json.dumps(spec.raw, indent=2, sort_keys=True, default=repr) + "\n")
         ev = Evaluator(spec, store, execution)
         study = _study(spec, out, storage, ev)
-        worker = f"{socket.gethostname()}:{out.resolve()}"
+        atomic_write(out / "spec.json", json.dumps(spec.raw, indent=2, sort_keys=True, default=repr) + "\n")
+        # the folder's own study is this process's alone (the lock): every trial asked and not
+        # told is its own, wherever the folder is now; a shared study tells apart its machines
+        worker = LOCAL if storage is None else f"{socket.gethostname()}:{out}"
         loop = _Loop(spec, ev, study, worker, on_trial)
         loop.run(total, progress)
         return finish(spec, ev, study, out)
@@ -134,25 +140,38 @@ def _study(spec: TuneSpec, out: Path, storage: str | None, ev: Evaluator) -> Any
         study = optuna.create_study(
             study_name=spec.name, storage=url, directions=list(DIRECTIONS), load_if_exists=True
         )
-    except (ValueError, ImportError) as exc:  # a malformed URL, a database driver not installed
-        raise InputError(f"`storage` {url!r} cannot hold the study: {exc}") from exc
+    except Exception as exc:  # a malformed URL, a driver not installed, a database that cannot be opened
+        where = "`storage` (--storage)" if storage else "the study's file"
+        raise InputError(f"{where} {url!r} cannot hold the study: {type(exc).__name__}: {exc}") from exc
     ident = _identity(spec)
     had = study.user_attrs.get("etobs_tuning")
     if had is None:
         study.set_user_attr("etobs_tuning", ident)
-        # the start design and the references inside the box are the first trials: the search
-        # starts from the designs the user knows (and they are on the plot and in the tables)
-        known = [("start", {})] + [(r.name, r.params) for r in spec.references]
-        for name, params in known:
-            values = start_values(spec, ev.n_nodes, params)
-            if values is not None:
-                study.enqueue_trial(values, user_attrs={"design": name})
     elif had != ident:
         raise InputError(
             f"the study {spec.name!r} in {url!r} holds the trials of another tuning (other parameters, runs, "
             "budget or seed); use another output folder or `name`"
         )
+    if not study.user_attrs.get("etobs_known"):  # once, also when a kill came in the middle
+        _enqueue_known(spec, study, ev)
+        study.set_user_attr("etobs_known", True)
     return study
+
+
+def _enqueue_known(spec: TuneSpec, study: Any, ev: Evaluator) -> None:
+    """Make the start design and the references inside the boxes the first trials (each once).
+
+    The search starts from the designs the user knows (and they are on the plot and in the
+    tables). A design already in the study (the same values: a reference equal to the start
+    design, or one enqueued before a kill) is not enqueued again.
+    """
+    have = [t.params for t in study.get_trials(deepcopy=False)]
+    known = [("start", {})] + [(r.name, r.params) for r in spec.references]
+    for name, params in known:
+        values = start_values(spec, ev.n_nodes, params)
+        if values is not None and values not in have:
+            study.enqueue_trial(values, user_attrs={"design": name})
+            have.append(values)
 
 
 def _identity(spec: TuneSpec) -> str:
@@ -175,10 +194,6 @@ class _Loop:
             "completed",
         ]
 
-    def _saved(self, runs: int) -> None:
-        """Count runs not simulated (screened, or the rest of a pruned candidate), in the study."""
-        self.study.set_user_attr("saved_runs", int(self.study.user_attrs.get("saved_runs", 0)) + runs)
-
     def run(self, total: int, progress: bool | None) -> None:
         from optuna.trial import TrialState
 
@@ -189,12 +204,7 @@ class _Loop:
         try:
             while True:
                 trials = self.study.get_trials(deepcopy=False)
-                mine = [
-                    t
-                    for t in trials
-                    if t.state == TrialState.RUNNING and t.user_attrs.get("worker") == self.worker
-                ]
-                batch = [t.number for t in mine]
+                batch = [t.number for t in trials if t.state == TrialState.RUNNING and self._mine(t)]
                 # the next trial's number (a waiting trial, the enqueued start design, has one already)
                 count = sum(t.state != TrialState.WAITING for t in trials)
                 while count < total and (not batch or count % self.spec.search.batch != 0):
@@ -210,9 +220,25 @@ class _Loop:
         finally:
             bar.close()
 
+    def _mine(self, trial: Any) -> bool:
+        """Whether a trial asked and not told is this tuning's to evaluate (on a resume)."""
+        if self.worker == LOCAL:
+            return True
+        said = trial.user_attrs.get("worker")
+        # killed between ask and the worker mark: the number it was about to ask says it
+        return said == self.worker or (
+            said is None and self.study.user_attrs.get(self._asking) == trial.number
+        )
+
+    @property
+    def _asking(self) -> str:
+        return f"asking:{self.worker}"
+
     def _ask(self, number: int) -> int:
         import optuna
 
+        if self.worker != LOCAL:
+            self.study.set_user_attr(self._asking, number)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             self.study.sampler = optuna.samplers.TPESampler(
@@ -242,10 +268,10 @@ class _Loop:
         live = [
             c for c in cands if not (spec.search.screen and any(x > 0 for x in c[3].constraints.values()))
         ]
-        front = self._front()
+        front = self._front(min(numbers))
         pruned: dict[int, Any] = {}
         first = math.ceil(spec.search.prune_share * spec.runs)
-        if spec.search.prune_share > 0 and 0 < first < spec.runs and live:
+        if spec.search.prune_share > 0 and MIN_PRUNE_RUNS <= first < spec.runs and live:
             recs = ev.simulate([(c[1], c[2]) for c in live], first)
             for c, r in zip(live, recs, strict=True):
                 if r is not None and _clearly_out(ev.figures(r), front, spec):
@@ -253,7 +279,6 @@ class _Loop:
         full = [c for c in live if c[0] not in pruned]
         recs = ev.simulate([(c[1], c[2]) for c in full], spec.runs) if full else []
         sims = dict(zip([c[0] for c in full], recs, strict=True))
-        saved = 0
         for n, kwargs, obs, cert in cands:
             trial = optuna.trial.Trial(self.study, frozen[n]._trial_id)
             attrs: dict[str, Any] = {
@@ -273,7 +298,7 @@ class _Loop:
                 # its constraints on the first runs: the sampler ranks infeasible trials by how far
                 # they miss, so a pruned trial must say by how much (a default 1 would say nothing)
                 cons.update(ev.budget_constraint(fig))
-                saved += spec.runs - first
+                attrs["saved_runs"] = spec.runs - first
                 state, values = TrialState.PRUNED, None
             elif n in sims and sims[n] is not None:
                 fig = ev.figures(sims[n])
@@ -281,30 +306,40 @@ class _Loop:
                 attrs.update(_fig_attrs(fig), simulated="full")
                 # the sampler sees errors below floor x budget as equal (search.error_floor): its
                 # trials go where the budget binds; the tables and the front keep the true error
-                seen = max(fig.error, spec.search.error_floor * spec.budget.error)
+                floor = (
+                    spec.search.error_floor * spec.budget.error if spec.budget.kind == "simulated" else 0.0
+                )
+                seen = max(fig.error, floor)
                 state, values = TrialState.COMPLETE, [fig.transmissions_rate, seen]
             elif n in sims:  # a chunk failed: its message is in the store's .error.json
                 attrs["simulated"] = "failed"
                 state, values = TrialState.FAIL, None
             else:  # screened out: the certificate rules it out whatever it simulates
-                saved += spec.runs
+                attrs["saved_runs"] = spec.runs
                 attrs["simulated"] = "screened"
                 state, values = TrialState.COMPLETE, [math.inf, math.inf]
-            # every trial carries the same constraints; one not evaluated counts as not met
-            for k in self.names:
-                cons.setdefault(k, 1.0)
+            # every trial carries the same constraints; one not evaluated (a screened trial's budget)
+            # is 0 for the sampler, which ranks infeasible trials by what they do miss, and blank
+            # in the tables
+            attrs["unevaluated"] = [k for k in self.names if k not in cons]
+            for k in attrs["unevaluated"]:
+                cons[k] = 0.0
             trial.set_user_attr(ATTR, attrs)  # one write: each is a transaction of the storage
             for k, x in cons.items():
                 trial.set_constraint(k, float(x))
             self.study.tell(n, values, state=state)
             if self.on_trial is not None:
                 self.on_trial(TrialRow.of(self.study.trials[n]))
-        if saved:
-            self._saved(saved)
         return len(cands)
 
-    def _front(self) -> list[tuple[float, float]]:
-        pts = [_objectives(t) for t in self.study.get_trials(deepcopy=False) if _feasible(t)]
+    def _front(self, before: int) -> list[tuple[float, float]]:
+        """The front of the trials numbered below ``before``, the batch's first.
+
+        Not those of the batch: a resume that finds part of the batch told must prune as the
+        uninterrupted tuning did.
+        """
+        trials = self.study.get_trials(deepcopy=False)
+        pts = [_objectives(t) for t in trials if t.number < before and _feasible(t)]
         return [pts[i] for i in pareto(pts)]
 
     def _best(self) -> str:
@@ -364,4 +399,5 @@ def _fig_attrs(fig: Any) -> dict[str, Any]:
         "error_mean": _num(fig.error_mean),
         "transmissions_se": _num(fig.transmissions_se),
         "error_se": _num(fig.error_se),
+        "node_rates": [_num(x) for x in fig.node_rates],
     }
