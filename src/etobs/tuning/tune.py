@@ -304,12 +304,7 @@ class _Loop:
                 fig = ev.figures(sims[n])
                 cons.update(ev.budget_constraint(fig))
                 attrs.update(_fig_attrs(fig), simulated="full")
-                # the sampler sees errors below floor x budget as equal (search.error_floor): its
-                # trials go where the budget binds; the tables and the front keep the true error
-                floor = (
-                    spec.search.error_floor * spec.budget.error if spec.budget.kind == "simulated" else 0.0
-                )
-                seen = max(fig.error, floor)
+                seen = _sampler_error(fig.error, spec)
                 state, values = TrialState.COMPLETE, [fig.transmissions_rate, seen]
             elif n in sims:  # a chunk failed: its message is in the store's .error.json
                 attrs["simulated"] = "failed"
@@ -360,6 +355,18 @@ def _feasible(t: Any) -> bool:
         and t.user_attrs.get(ATTR, {}).get("simulated") == "full"
         and all(c <= 0 for c in cons)
     )
+
+
+def _sampler_error(error: float, spec: TuneSpec) -> float:
+    """The second objective the sampler is told: the simulated error, raised to ``error_floor x budget``.
+
+    The search goes where the budget binds and spends no trials on errors far below it
+    (``search.error_floor``). With a certified budget, whose bound is most often far above
+    the simulated error, the value is then ``floor x budget`` for every candidate: the
+    search minimizes transmissions alone, as the question asks. The tables and the front
+    keep the true transmissions and simulated error.
+    """
+    return max(error, spec.search.error_floor * spec.budget.error)
 
 
 def _objectives(t: Any) -> tuple[float, float]:
