@@ -62,6 +62,9 @@ def test_a_candidate_that_fails_a_condition_is_never_on_the_front(wide):
         assert r["certified"] and r["feasible"]
         assert all(r[k] <= 0 for k in r if k.startswith("constraint_"))
         assert r["error"] <= 12.0
+        # certified under what the certificate did not check, said on the row
+        assert r["cert_assumptions"].startswith("solutions are complete")
+        assert "E = (30, 60) bounds |dh_i/dx f_p|" in r["cert_assumptions"]
 
 
 def test_the_front_is_the_non_dominated_feasible_trials(wide):
@@ -438,3 +441,10 @@ def test_the_front_plot_draws_what_it_says(wide):
     assert f"not certified ({len(full)})" in labels
     assert "sigma*c > 1 (not certified)" in labels and "row 8" in labels
     assert f"{len(wide.trials)} trials, {len(wide.front)} on the front" in fig._suptitle.get_text()
+
+
+@pytest.mark.parametrize("trials", [0, -1, 2.5, True])
+def test_a_bad_trial_count_is_refused_naming_it(trials, tmp_path):
+    with pytest.raises(InputError, match=rf"`trials` must be a positive integer; got {trials!r}"):
+        tune(parse_tune_spec(raw_tune()), tmp_path / "o", trials=trials, executor="serial", progress=False)
+    assert not (tmp_path / "o").exists()

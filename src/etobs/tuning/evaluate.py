@@ -43,6 +43,9 @@ class CertificateFigures:
     error_bound: float
     tau: tuple[float, ...]
     constraints: dict[str, float]
+    #: The hypotheses the certificate rests on and did not check (``Certificate.assumptions``):
+    #: a candidate marked certified is certified under them.
+    assumptions: str = ""
 
 
 @dataclass(frozen=True)
@@ -167,7 +170,8 @@ class Evaluator:
             bound = cert.error_bound
             cons["budget"] = (bound - spec.budget.error) / spec.budget.error if math.isfinite(bound) else 1.0
         text = "; ".join(f"{c.name}{'' if c.node is None else f' [node {c.node}]'}" for c in fails)
-        return CertificateFigures(cert.ok, text, cert.nu, cert.mu, cert.error_bound, taus, cons)
+        assumed = "; ".join(cert.assumptions)
+        return CertificateFigures(cert.ok, text, cert.nu, cert.mu, cert.error_bound, taus, cons, assumed)
 
     def simulate(
         self, candidates: list[tuple[dict[str, Any], str | None]], runs: int, seed: int | None = None

@@ -66,6 +66,7 @@ class TrialRow:
             completed=a.get("completed", 0),
             certified=bool(a.get("cert_ok", False)),
             cert_failures=a.get("cert_failures", ""),
+            cert_assumptions=a.get("cert_assumptions", ""),
             nu=a.get("nu"),
             mu=a.get("mu"),
             error_bound=a.get("error_bound"),
@@ -194,7 +195,12 @@ def _references(
             row[f"{prefix}transmissions_rate"] = None if fig is None else fig.transmissions_rate
             row[f"{prefix}error"] = None if fig is None else fig.error
             row[f"{prefix}transmissions_mean"] = None if fig is None else fig.transmissions_mean
-        row.update(certified=cert.ok, cert_failures=cert.failures, error_bound=_finite(cert.error_bound))
+        row.update(
+            certified=cert.ok,
+            cert_failures=cert.failures,
+            cert_assumptions=cert.assumptions,
+            error_bound=_finite(cert.error_bound),
+        )
         out.append(row)
     return out
 

@@ -274,8 +274,9 @@ class _Loop:
         if spec.search.prune_share > 0 and MIN_PRUNE_RUNS <= first < spec.runs and live:
             recs = ev.simulate([(c[1], c[2]) for c in live], first)
             for c, r in zip(live, recs, strict=True):
-                if r is not None and _clearly_out(ev.figures(r), front, spec):
-                    pruned[c[0]] = ev.figures(r)
+                fig = None if r is None else ev.figures(r)
+                if fig is not None and _clearly_out(fig, front, spec):
+                    pruned[c[0]] = fig
         full = [c for c in live if c[0] not in pruned]
         recs = ev.simulate([(c[1], c[2]) for c in full], spec.runs) if full else []
         sims = dict(zip([c[0] for c in full], recs, strict=True))
@@ -286,6 +287,7 @@ class _Loop:
                 "observer": obs,
                 "cert_ok": cert.ok,
                 "cert_failures": cert.failures,
+                "cert_assumptions": cert.assumptions,
                 "nu": _num(cert.nu),
                 "mu": _num(cert.mu),
                 "error_bound": _num(cert.error_bound),
