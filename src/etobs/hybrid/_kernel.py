@@ -161,10 +161,15 @@ flow_call, guard_call, jump_call = flow, guard, jump
 
 @numba.njit(inline="always", error_model="numpy")
 def _dense_eval(Q, nq, dop853, x0, theta, out):
-    """Continuous extension at ``theta`` (see ``Tableau.evaluate``: same operations).
+    """Continuous extension at ``theta`` in [0, 1] of the step from ``x0``, into ``out``.
 
-    ``out`` is the accumulator; the loop over components is the inner one, so that it
-    vectorizes (the sampled event functions evaluate this on every step).
+    With the ``nq`` rows ``Q_k`` of :func:`_dense_coeffs` (in ``_kernel_body.py``),
+    Horner's scheme in ``theta``: ``x0 + theta (Q_0 + theta (Q_1 + ...))`` for
+    Dormand--Prince 5(4), and for DOP853 (Hairer et al.'s form) with the factors
+    ``theta`` and ``1 - theta`` alternating: ``x0 + theta (Q_0 + (1 - theta) (Q_1 +
+    theta (Q_2 + ...)))``. ``out`` is the accumulator; the loop over components is the
+    inner one, so that it vectorizes (the sampled event functions evaluate this on
+    every step).
     """
     n = x0.shape[0]
     one_minus = 1.0 - theta

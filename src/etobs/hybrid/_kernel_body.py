@@ -316,7 +316,9 @@ def _solve_one(
         # entries moves them there too, and a check of every stage would cost a step's sums)
         if nf < n and not (_tail_zero(K, 0, nf) and _tail_zero(K, s, nf)):
             store_i64(args[6], FLOW_BEYOND_N_FLOW)
-        # error norm (see Tableau.error_norm)
+        # error norm: the scaled RMS norm of the embedded estimate h sum_k e_k K_k (Hairer et
+        # al. II.4 (4.11)); DOP853 corrects its 5th-order estimate by the 3rd-order one,
+        # err = |h| e5^2 / sqrt((e5^2 + 0.01 e3^2) n), as their code does
         _comb(TE, K, s + 1, dy, nf)
         e5 = 0.0
         for q in range(nf):
@@ -573,7 +575,12 @@ def _initial_step(args, p, t, x, f, t_end, rtol, atol, max_step, y, f1, nf):
 
 @jit
 def _dense_coeffs(args, p, t, x, x_new, K, h, Q, y, dy):
-    """Coefficients of the continuous extension (``Tableau.dense``) of the first ``len(dy)`` entries."""
+    """Rows ``Q`` of the continuous extension of the first ``len(dy)`` entries (read by ``_dense_eval``).
+
+    Dormand--Prince 5(4): ``Q_k = h sum_i P_ik K_i``. DOP853: ``Q_0 = x_new - x``,
+    ``Q_1 = h K_0 - Q_0``, ``Q_2 = 2 Q_0 - h (K_s + K_0)`` and ``Q_(3+r) = h sum_i D_ri K_i``
+    over the stages and the extra stages computed here.
+    """
     n = x.shape[0]
     nf = dy.shape[0]
     if not DOP853:
