@@ -48,9 +48,9 @@ BACKEND_HELP = (
 
 
 def backend(text: str) -> str:
-    """An argparse type for ``--backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
+    """An argparse type for ``--backend`` (:func:`~etobs.hybrid.checks.check_backend`)."""
     from etobs.errors import InputError
-    from etobs.hybrid.solver import check_backend
+    from etobs.hybrid.checks import check_backend
 
     try:
         return check_backend(text, "--backend")

@@ -13,10 +13,10 @@ from etobs._progress import horizon_bar, progress_shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.result import EstimationResult
+from etobs.hybrid.checks import check_backend
 from etobs.hybrid.options import SaveAt, SolverOptions, checked_options, checked_save
 from etobs.hybrid.reference import solve_reference
 from etobs.hybrid.solution import GridMax
-from etobs.hybrid.solver import check_backend
 
 
 def simulate(

@@ -27,8 +27,8 @@ from etobs._spec import number as _number
 from etobs._validate import shown
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
+from etobs.hybrid.checks import check_backend
 from etobs.hybrid.options import SolverOptions
-from etobs.hybrid.solver import check_backend
 
 #: Keys of ``[solver]``: every field of :class:`SolverOptions` (written once, there).
 _SOLVER_KEYS = {f.name for f in fields(SolverOptions) if f.init}
@@ -281,7 +281,7 @@ def _window(key: str, value: Any, t_end: float) -> tuple[float, float]:
 
 
 def parse_backend(value: Any) -> str:
-    """Validate ``execution.backend`` (:func:`~etobs.hybrid.solver.check_backend`)."""
+    """Validate ``execution.backend`` (:func:`~etobs.hybrid.checks.check_backend`)."""
     try:
         return check_backend(value, "execution.backend")
     except EtobsError as exc:

@@ -45,8 +45,8 @@ from numba.core.extending import intrinsic
 
 from etobs.compile.ccall import address, ccall, load_i64, store_i64
 from etobs.hybrid import _jitcache
+from etobs.hybrid.options import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.peaks import peak_probes as _peak_probes
-from etobs.hybrid.solver import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.status import Status
 from etobs.hybrid.zeno import zeno_window as _zeno_window
 
@@ -259,7 +259,7 @@ def build(method: str) -> Any:
             here / f
             for f in (
                 "_kernel.py",
-                "solver.py",
+                "options.py",
                 "status.py",
                 "tableau.py",
                 "zeno.py",

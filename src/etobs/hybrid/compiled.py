@@ -25,10 +25,10 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
+from etobs.hybrid.checks import check_log_columns, check_progress, check_sizes, span
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid, log_names
 from etobs.hybrid.status import Status
-from etobs.hybrid.system import _check_sizes, check_log_columns
 
 #: Jump-log rows and arc points kept per run on the first pass (runs with more are
 #: solved again with room for all of them); bounded so that a big batch stays small.
@@ -96,7 +96,7 @@ class CompiledSystem:
     log_columns: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
-        _check_sizes(self.n, self.n_rules, self.n_flow)
+        check_sizes(self.n, self.n_rules, self.n_flow)
         object.__setattr__(self, "log_columns", check_log_columns(self.log_columns, self.n))
         v.integer("n_params", self.n_params, lower=0)
         v.integer("n_work", self.n_work, lower=0)
@@ -222,8 +222,6 @@ def solve_compiled(
     """
     if not isinstance(system, CompiledSystem):
         raise InputTypeError(f"`system` must be a CompiledSystem; got {type(system).__name__}")
-    from etobs.hybrid.solver import check_progress, span
-
     t0, t_end = span(t_span)
     progress = check_progress(progress)
     x = np.array(v.batch("x0", x0, system.n), dtype=float, order="C")

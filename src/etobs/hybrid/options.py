@@ -20,6 +20,12 @@ _INT_LIMIT = 2**62
 #: takes 11,100 steps. The earlier 10,000,000 let a runaway run go on for 6 minutes.
 MAX_STEPS = 2_000_000
 
+# Step-size controller constants, as in Hairer, Nørsett & Wanner (1993), II.4; the
+# engine's kernel template reads them.
+SAFETY = 0.9  # keep the next error estimate below the tolerance with margin
+MIN_FACTOR = 0.2  # never shrink a step by more than 5x at once
+MAX_FACTOR = 10.0  # never grow a step by more than 10x at once
+
 
 @dataclass(frozen=True)
 class SolverOptions:

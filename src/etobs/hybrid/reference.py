@@ -19,12 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from etobs.errors import ModelError
+from etobs import _validate as v
+from etobs.errors import InputTypeError, ModelError
+from etobs.hybrid.checks import check_progress, span
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.peaks import peak_probes
 from etobs.hybrid.recorder import Recorder
 from etobs.hybrid.solution import GridMax, HybridSolution, SavedGrid, max_over_grid
-from etobs.hybrid.solver import check_inputs, check_progress
 from etobs.hybrid.status import Status
 from etobs.hybrid.system import BatchedSystem, HybridSystem, raised, read_only
 from etobs.hybrid.zeno import zeno_window
@@ -100,7 +101,10 @@ def solve_reference(
     """
     if isinstance(system, HybridSystem):
         system = system.batched()
-    X, t0, t_end = check_inputs(system, x0, t_span)
+    if not isinstance(system, BatchedSystem):
+        raise InputTypeError(f"`system` must be a HybridSystem; got {type(system).__name__}")
+    t0, t_end = span(t_span)
+    X = v.batch("x0", x0, system.n)
     progress = check_progress(progress)
     opts = options or SolverOptions()
     save = save or SaveAt()

@@ -36,72 +36,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
-from etobs import _validate as v
-from etobs.errors import InputError, InputTypeError
+from etobs.errors import InputError
+from etobs.hybrid.checks import check_backend
 from etobs.hybrid.options import SaveAt, SolverOptions, checked_options, checked_save
 from etobs.hybrid.solution import HybridSolution
 from etobs.hybrid.system import BatchedSystem, HybridSystem
-
-# Step-size controller constants, as in Hairer, Nørsett & Wanner (1993), II.4.
-SAFETY = 0.9  # keep the next error estimate below the tolerance with margin
-MIN_FACTOR = 0.2  # never shrink a step by more than 5x at once
-MAX_FACTOR = 10.0  # never grow a step by more than 10x at once
-
-
-#: The solvers of :func:`solve` (and of :func:`etobs.simulate`).
-BACKENDS = ("auto", "engine", "scipy")
-#: Earlier names: ``"numba"`` is the engine; the batched numpy solver is retired.
-RETIRED = ("numpy", "fast")
-
-
-def check_backend(backend: Any, name: str = "backend") -> str:
-    """``backend`` validated (``"numba"`` read as ``"engine"``); the retired numpy solver is named.
-
-    ``name`` is how the error message names the argument (``"execution.backend"`` in a spec).
-    """
-    if backend == "numba":
-        return "engine"
-    if backend in RETIRED:
-        raise InputError(
-            f"`{name}` {backend!r} (the batched numpy solver) was retired: the compiled engine "
-            "runs every feature; use 'engine' (the default, 'auto') or 'scipy' (the solve_ivp reference)"
-        )
-    if backend not in BACKENDS:
-        raise InputError(f"`{name}` must be one of {BACKENDS} (or 'numba' for 'engine'); got {backend!r}")
-    return str(backend)
-
-
-def check_inputs(system: Any, x0: Any, t_span: Any) -> tuple[np.ndarray, float, float]:
-    """Validate the arguments shared by the batched solvers; return ``(x0 (B, n), t0, t_end)``."""
-    if not isinstance(system, BatchedSystem):
-        raise InputTypeError(f"`system` must be a HybridSystem; got {type(system).__name__}")
-    t0, t_end = span(t_span)
-    return v.batch("x0", x0, system.n), t0, t_end
-
-
-def span(t_span: Any) -> tuple[float, float]:
-    """Validate a time span ``(t0, t_end)`` with ``t0 <= t_end``."""
-    try:
-        t0, t_end = t_span
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"`t_span` must be a pair (t0, t_end); got {t_span!r}") from exc
-    t0 = v.real("t_span[0]", t0)
-    t_end = v.real("t_span[1]", t_end)
-    if t_end < t0:
-        raise InputError(f"`t_span` must satisfy t0 <= t_end; got ({t0:g}, {t_end:g})")
-    return t0, t_end
-
-
-def check_progress(progress: Any) -> Callable[[int], object] | None:
-    """``progress`` validated: a callable ``progress(n_runs_finished)``, or ``None``."""
-    if progress is not None and not callable(progress):
-        raise InputTypeError(
-            "`progress` must be a callable progress(n_runs_finished) (a tqdm bar's update, say) "
-            f"or None; got {type(progress).__name__}"
-        )
-    return progress
 
 
 def solve(

@@ -21,6 +21,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError, ModelError
+from etobs.hybrid.checks import check_log_columns, check_sizes
 
 if TYPE_CHECKING:
     from etobs.hybrid.compiled import CompiledSystem
@@ -36,28 +37,6 @@ def _names(n_rules: int, rule_names: tuple[str, ...]) -> tuple[str, ...]:
     if len(rule_names) != n_rules:
         raise InputError(f"`rule_names` has {len(rule_names)} names; expected n_rules={n_rules}")
     return tuple(rule_names)
-
-
-def _check_sizes(n: int, n_rules: int, n_flow: int | None) -> None:
-    v.integer("n", n, lower=1)
-    v.integer("n_rules", n_rules, lower=0)
-    if n_flow is not None:
-        v.integer("n_flow", n_flow, lower=1)
-        if n_flow > n:
-            raise InputError(f"`n_flow` must be <= n = {n}; got {n_flow}")
-
-
-def check_log_columns(log_columns: Any, n: int) -> tuple[int, ...]:
-    """``log_columns`` validated: distinct state indices in ``0 .. n-1`` (empty: none)."""
-    if isinstance(log_columns, tuple | list | range | np.ndarray) and len(log_columns) == 0:
-        return ()
-    cols = v.index_tuple("log_columns", log_columns, "state")
-    beyond = [c for c in cols if c >= n]
-    if beyond:
-        raise InputError(
-            f"`log_columns` must be state indices 0..{n - 1} (n = {n}); got {list(cols)} ({beyond[0]} >= n)"
-        )
-    return cols
 
 
 @dataclass(frozen=True)
@@ -128,7 +107,7 @@ class HybridSystem:
     _compiled: dict[str, Any] = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
-        _check_sizes(self.n, self.n_rules, self.n_flow)
+        check_sizes(self.n, self.n_rules, self.n_flow)
         v.function("flow", self.flow)
         v.function("guard", self.guard)
         v.function("jump", self.jump)
@@ -260,7 +239,7 @@ class BatchedSystem:
     log_columns: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
-        _check_sizes(self.n, self.n_rules, self.n_flow)
+        check_sizes(self.n, self.n_rules, self.n_flow)
         v.function("flow", self.flow)
         v.function("guard", self.guard)
         v.function("jump", self.jump)
