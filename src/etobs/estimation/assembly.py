@@ -1,16 +1,8 @@
 """The hybrid model (16)--(22) of an :class:`~etobs.estimation.EstimationProblem`.
 
-A *channel* is what one node sends: the output node ``i`` sends ``ytilde_i`` (or, in
-the observer-copy variant of Remark 3, the output estimation error
-``ytilde_i - yhat_i``), an input node sends ``u_k`` (section 7.3). Every channel has
-
-* a *sent* value: the value the node last sent; its rule acts on
-  ``e = sent - (current value)``;
-* a *held* value: what the observer holds and runs on (``ybar_i`` or ``ubar_k``).
-
-On an ideal network both are the same entries of the state. With a
-:class:`~etobs.model.network.Network` they are separate, and each channel also carries
-its packets in flight and its counters; a second jump rule per channel delivers the
+The state ``q`` and its channels (what each node sends, what the observer holds) are
+laid out in :mod:`etobs.estimation.layout`. With a
+:class:`~etobs.model.network.Network`, a second jump rule per channel delivers the
 packet whose arrival time has come (see :mod:`etobs.model.network`).
 
 Jump rules: ``0 .. C-1`` are the channels' transmissions. With a network the
@@ -22,52 +14,17 @@ leaves the link before the new one enters it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from etobs.estimation import _network_jumps as nj
-from etobs.estimation._network_jumps import N_META
+from etobs.estimation.layout import Channel
 from etobs.hybrid.system import BatchedSystem
-from etobs.model.network import Link
-from etobs.model.rules import TriggerRule
 
 if TYPE_CHECKING:
     from etobs.estimation.calls import ModelCalls
     from etobs.estimation.problem import EstimationProblem
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One node as the hybrid model sees it (indices into the hybrid state ``q``)."""
-
-    name: str
-    rule: TriggerRule
-    kind: str  # "y" or "u"
-    index: np.ndarray  # into y or u
-    held: np.ndarray  # into q: what the observer holds
-    sent: np.ndarray  # into q: what the node last sent
-    rule_state: slice
-    net: slice | None  # the network block (meta, then slots), or None
-    link: Link | None
-
-    @property
-    def size(self) -> int:
-        return int(self.index.shape[0])
-
-    @property
-    def slot_width(self) -> int:
-        """Arrival time, sequence number, values."""
-        return 2 + self.size
-
-
-def slot_columns(ch: Channel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Columns of ``q`` of the arrival times, sequence numbers and values of every slot."""
-    assert ch.net is not None and ch.link is not None
-    w, start = ch.slot_width, ch.net.start + N_META
-    base = start + w * np.arange(ch.link.capacity)
-    return base, base + 1, base[:, None] + 2 + np.arange(ch.size)[None, :]
 
 
 def build_system(pb: EstimationProblem, calls: ModelCalls) -> BatchedSystem:

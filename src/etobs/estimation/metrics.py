@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
-from etobs.estimation.result import EstimationResult
 from etobs.hybrid.solution import max_over_grid
+
+if TYPE_CHECKING:  # a result's tables call these: the result is above, named for types only
+    from etobs.estimation.result import EstimationResult
 
 
 def _window(window: Any, result: EstimationResult) -> tuple[float, float]:

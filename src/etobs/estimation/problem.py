@@ -1,67 +1,29 @@
 """The event-triggered estimation problem and its hybrid model, eq. (16)--(22).
 
-The hybrid state is ``q = (x, z, ybar, ubar, s_0, ..., s_{C-1}, [network], [run])``
-where ``s_c`` is the internal state of node ``c``'s rule (``eta`` for the dynamic rule),
-``ubar`` the held inputs of the input nodes (section 7.3, empty without them), and the
-network part (only with a :class:`~etobs.model.network.Network`) the values the nodes
-last sent, their packets in flight and counters, and the run's index. We carry the held
-value ``ybar`` rather than the paper's ``e``: ``e_i = ybar_i - ytilde_i(t)`` is then
-exact at every instant and ``ybar`` is constant along flows (eq. (4)), so the paper's
-``e``-dynamics (eq. (9)) follow without being integrated.
+Its hybrid state ``q`` is laid out in :mod:`etobs.estimation.layout` (held outputs
+``ybar`` rather than the paper's ``e``, eq. (4)); :meth:`EstimationProblem.hybrid_system`
+assembles the model (:mod:`etobs.estimation.assembly`).
 """
 
 from __future__ import annotations
 
-import itertools
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from etobs.errors import InputError, InputTypeError, ModelError
-from etobs.estimation._network_jumps import N_META
-from etobs.estimation.assembly import Channel
-from etobs.hybrid.system import BatchedSystem
+from etobs.estimation._network_jumps import EMPTY
+from etobs.estimation.assembly import build_system
+from etobs.estimation.calls import ModelCalls, refuse_complex
+from etobs.estimation.layout import StateLayout, slot_columns, state_layout
+from etobs.hybrid.system import BatchedSystem, raised, read_only
 from etobs.model.network import Network
 from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
 from etobs.model.signals import Signal, Sinusoid, as_signal
-
-if TYPE_CHECKING:
-    from etobs.estimation.calls import ModelCalls
-
-
-@dataclass(frozen=True)
-class StateLayout:
-    """Where each part of the hybrid state ``q`` lives."""
-
-    x: slice
-    z: slice
-    ybar: slice
-    ubar: slice
-    rule: tuple[slice, ...]
-    outputs: tuple[np.ndarray, ...]
-    channels: tuple[Channel, ...]
-    run: int | None
-    n: int
-    n_flow: int | None = None  # entries from here on are constant along flows (the network's)
-
-    @property
-    def sent_columns(self) -> tuple[int, ...]:
-        """Entries of ``q`` holding what each node last sent, node after node, in index order.
-
-        The solvers log them after every jump (``log_columns``): after a node's
-        transmission they hold the value it sent (eq. (22)), which the transmissions table
-        of :meth:`EstimationResult.to_pandas` reads.
-        """
-        return tuple(int(c) for ch in self.channels for c in ch.sent)
-
-    @property
-    def sent_names(self) -> tuple[str, ...]:
-        """Names of :attr:`sent_columns`: ``sent_y<k>`` for output ``k``, ``sent_u<k>`` for input ``k``."""
-        return tuple(f"sent_{ch.kind}{int(k)}" for ch in self.channels for k in ch.index)
 
 
 @dataclass(frozen=True)
@@ -149,7 +111,7 @@ class EstimationProblem:
         object.__setattr__(self, "u", as_signal("u", self.u, p.n_u, "n_u"))
         object.__setattr__(self, "v", as_signal("v", self.v, p.n_v, "n_v"))
         object.__setattr__(self, "m", as_signal("m", self.m, p.n_y, "n_y"))
-        object.__setattr__(self, "layout", _layout(p, self.observer, nodes, inputs, self.network))
+        object.__setattr__(self, "layout", state_layout(p, self.observer, nodes, inputs, self.network))
         _check_shapes(self)
         _check_noise(self)
         _check_sigma_c(self)
@@ -200,9 +162,6 @@ class EstimationProblem:
         ``compiled=None`` compiles them when numba can and calls the Python functions
         otherwise (for evaluating results); ``False`` always calls the Python functions.
         """
-        from etobs.errors import ModelError
-        from etobs.estimation.calls import ModelCalls
-
         key = compiled is not False
         if key not in self._calls:
             if compiled is None:
@@ -237,9 +196,6 @@ class EstimationProblem:
         packets' fates from the stream ``(seed, run_ids[b], node)`` (default
         ``run_ids = 0 .. B-1``).
         """
-        from etobs.estimation._network_jumps import EMPTY
-        from etobs.estimation.assembly import slot_columns
-
         b = x0.shape[0]
         lay = self.layout
         tt = np.full(b, t0)
@@ -273,8 +229,6 @@ class EstimationProblem:
         nodes); with a network, rules ``0 .. C-1`` deliver their packets and ``C .. 2C-1``
         are the transmissions. It calls the user's Python functions as they are.
         """
-        from etobs.estimation.assembly import build_system
-
         return build_system(self, self.calls(False))
 
 
@@ -331,72 +285,6 @@ def _check_inputs(nodes: tuple[InputNode, ...], n_u: int) -> None:
             seen[k] = i
 
 
-def _layout(
-    plant: Plant,
-    obs: Observer,
-    nodes: tuple[Node, ...],
-    inputs: tuple[InputNode, ...],
-    network: Network | None,
-) -> StateLayout:
-    k = 0
-
-    def take(size: int) -> slice:
-        nonlocal k
-        sl = slice(k, k + size)
-        k += size
-        return sl
-
-    n_ubar = sum(len(nd.inputs) for nd in inputs)
-    x, z, ybar, ubar = take(plant.n_x), take(obs.n_z), take(plant.n_y), take(n_ubar)
-    everyone: list[Node | InputNode] = [*nodes, *inputs]
-    rule = tuple(take(nd.rule.n_state) for nd in everyone)
-    outputs = tuple(np.array(nd.outputs, dtype=np.intp) for nd in nodes)
-    index = [*outputs, *(np.array(nd.inputs, dtype=np.intp) for nd in inputs)]
-    held: list[np.ndarray] = [ybar.start + idx for idx in outputs]
-    offsets = np.cumsum([0] + [len(nd.inputs) for nd in inputs])
-    held += [ubar.start + np.arange(a, b) for a, b in itertools.pairwise(offsets)]
-    n_ch = len(everyone)
-    sent, nets, links = list(held), [None] * n_ch, [None] * n_ch
-    n_flow = None
-    if network is not None:
-        sent_block = take(plant.n_y + n_ubar)
-        n_flow = sent_block.start
-        sent = [h - ybar.start + sent_block.start for h in held]
-        for c, idx in enumerate(index):
-            link = network.link(c, n_ch)
-            links[c] = link  # type: ignore[call-overload]
-            nets[c] = take(N_META + link.capacity * (2 + idx.shape[0]))  # type: ignore[call-overload]
-    run = take(1).start if network is not None else None
-    names = [nd.name or f"node{i}" for i, nd in enumerate(nodes)]
-    names += [nd.name or f"input{i}" for i, nd in enumerate(inputs)]
-    channels = tuple(
-        Channel(
-            name=names[c],
-            rule=everyone[c].rule,
-            kind="y" if c < len(nodes) else "u",
-            index=index[c],
-            held=held[c],
-            sent=sent[c],
-            rule_state=rule[c],
-            net=nets[c],
-            link=links[c],
-        )
-        for c in range(n_ch)
-    )
-    return StateLayout(
-        x=x,
-        z=z,
-        ybar=ybar,
-        ubar=ubar,
-        rule=rule,
-        outputs=outputs,
-        channels=channels,
-        run=run,
-        n=k,
-        n_flow=n_flow,
-    )
-
-
 def _finite_at_start(ybar: np.ndarray, what: str) -> None:
     """Refuse held outputs that start NaN or infinite, naming the function (not ``x0``, which is finite)."""
     bad = ~np.all(np.isfinite(ybar), axis=1)
@@ -413,9 +301,6 @@ def _check_shapes(pb: EstimationProblem) -> None:
     The inputs are read-only, as in the solvers: a function that writes into them is
     refused here, naming it, on either backend.
     """
-    from etobs.estimation.calls import refuse_complex
-    from etobs.hybrid.system import raised, read_only
-
     p, o = pb.plant, pb.observer
     t0 = np.zeros(1)
     x, z = read_only(np.zeros(p.n_x)), read_only(np.zeros(o.n_z))

@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from etobs.errors import InputError
+from etobs.estimation._network_jumps import EMPTY, LOST, N_APPLIED, OVERFLOW, STALE
+from etobs.estimation.layout import slot_columns
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.solution import HybridSolution, JumpLog
 from etobs.hybrid.status import Status
@@ -157,9 +159,6 @@ class EstimationResult:
         pb = self.problem
         if pb.network is None:
             raise InputError("this problem has no network: give EstimationProblem(network=Network(...))")
-        from etobs.estimation._network_jumps import EMPTY, LOST, N_APPLIED, OVERFLOW, STALE
-        from etobs.estimation.assembly import slot_columns
-
         q = self.solution.x_final
         C = pb.n_channels
         keys = ("lost", "overflow", "stale", "in_flight", "applied")
