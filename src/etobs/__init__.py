@@ -13,9 +13,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from etobs._version import __version__
 from etobs.errors import EtobsError, InputError, InputTypeError, ModelError
-
-__version__ = "0.1.0"
 
 #: Public name -> the module that defines it (imported when the name is first used).
 _EXPORTS = {

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from etobs import __version__
+from etobs._version import __version__
 from etobs.cli._args import BACKEND_HELP, backend, folder, positive_float
 from etobs.errors import InputError
 from etobs.estimation import (

@@ -9,8 +9,8 @@ import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
-from etobs import __version__
 from etobs._spec import SpecError
+from etobs._version import __version__
 from etobs.cli import check, compare, demo, runtime, sweep, tune
 from etobs.errors import EtobsError, debug
 

@@ -178,7 +178,7 @@ class Experiment(abc.ABC):
         format are included, so an upgrade never mixes old and new numbers. (A change to
         a user factory's code is not seen: use a new output folder.)
         """
-        from etobs import __version__
+        from etobs._version import __version__
 
         st, m = self.initial_states, self.metrics
         return normalize(

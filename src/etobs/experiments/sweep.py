@@ -225,7 +225,7 @@ def _versions() -> dict[str, str]:
     import pyarrow
     import scipy
 
-    from etobs import __version__
+    from etobs._version import __version__
 
     return {
         "etobs": __version__,
