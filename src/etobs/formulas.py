@@ -1,39 +1,170 @@
-"""The triggering rules' arithmetic, written once as plain scalar Python (standard library only).
+"""The kinds of triggering rule and K-function: each declared once, with its arithmetic.
 
-One implementation of each formula, run three ways:
+A **kind** is one descriptor: its numbers (names and limits), the K-function slots it
+uses, and its formulas written as plain scalar Python (standard library only). Every
+other form is derived from the descriptor, never written again:
 
-* the engine's generated model (:mod:`etobs.estimation._model_source`) has numba
-  compile these functions into itself (they are small: numba inlines them);
+* the engine's generated model (:mod:`etobs.estimation._model_source`) calls the
+  formulas by name (numba compiles and inlines them) with arguments it reads from the
+  descriptor;
 * the rule and K-function objects (:mod:`etobs.model.rules`, :mod:`etobs.model.functions`)
-  call them on numpy arrays (plain arithmetic works elementwise), for the reference
-  solver and for evaluating results;
-* the stdlib-only sensor node (:mod:`etobs.runtime.sampled_rule`) calls them as is.
+  validate their fields against the declared numbers and evaluate the same formulas on
+  numpy arrays (plain arithmetic works elementwise), for the reference solver and for
+  evaluating results;
+* the stdlib-only sensor node (:mod:`etobs.runtime.sampled_rule`) parses a rule spec by
+  the kind's name and numbers and calls the formulas as is;
+* the comparison spec's rule kinds (:mod:`etobs.experiments.compare_spec`) and the
+  docs' table of kinds (``docs/extensions.md``, checked by a test) are the registries
+  :data:`RULE_KINDS` and :data:`K_KINDS`.
 
-The K-functions are given by a kind code and two numbers ``(k1, k2)``; a user's
-``Custom`` function is called directly by each of the three and is not here.
+An unknown kind is an error on every path (:func:`rule_kind`, :func:`k_kind`), never a
+fallback value. Adding a kind is one descriptor here and one frozen class in
+:mod:`etobs.model` that names it; ``tests/model/test_kinds.py`` walks the registries
+and fails for a kind without its forms.
+
+A rule's formulas read named arguments (:class:`Formula`): ``"e"`` is ``|e_i|``, ``"y"``
+``|ytilde_i|`` (the current measurement), ``"s"`` the rule's scalar state, ``"gamma(e)"``
+the K-function of slot ``gamma`` at ``|e_i|`` (``"alpha(s)"`` at the state), and any
+other name one of the kind's numbers.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
-#: K-function kinds (their numbers ``k1, k2``): ``k1 s``, ``k1 s^2``, ``k1 s^k2``, a
-#: user function, the constant ``k1`` (a weight ``d'`` given as a number).
-LINEAR, QUADRATIC, POWER, CUSTOM, CONSTANT = 0, 1, 2, 3, 4
-#: How a sensor spec names the kinds a sensor node runs (:mod:`etobs.runtime.sampled_rule`).
-SENSOR_NAMES = {"linear": LINEAR, "quadratic": QUADRATIC, "power": POWER}
+from etobs.errors import InputError
 
 
-def k_value(kind: int, k1: float, k2: float, s: Any) -> Any:
-    """The K-function of ``kind`` with numbers ``k1, k2`` at ``s`` (a float or an array)."""
-    if kind == LINEAR:
-        return k1 * s
-    if kind == QUADRATIC:
-        return k1 * (s * s)
-    if kind == POWER:
-        return k1 * s**k2
-    return k1 + 0.0 * s  # CONSTANT (same shape as s)
+@dataclass(frozen=True)
+class Number:
+    """A number a kind takes, with its limits (``lower <= value <= upper``, open where said)."""
+
+    name: str
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+
+    def limits(self) -> dict[str, Any]:
+        """The limits as keyword arguments of :func:`etobs._validate.real`."""
+        return {
+            "lower": self.lower,
+            "upper": self.upper,
+            "lower_open": self.lower_open,
+            "upper_open": self.upper_open,
+        }
+
+    def refusal(self, value: float) -> str:
+        """Why ``value`` is out of the limits (``""`` when it is in them)."""
+        lo, hi = self.lower, self.upper
+        if lo is not None and (value < lo or (self.lower_open and value == lo)):
+            return f"must be {'>' if self.lower_open else '>='} {lo:g}"
+        if hi is not None and (value > hi or (self.upper_open and value == hi)):
+            return f"must be {'<' if self.upper_open else '<='} {hi:g}"
+        return ""
+
+
+_POSITIVE = {"lower": 0.0, "lower_open": True}
+
+
+# ---- K-functions ---------------------------------------------------------------------
+
+
+def linear(k1: Any, k2: Any, s: Any) -> Any:
+    """``k1 s``."""
+    return k1 * s
+
+
+def linear_inverse(k1: Any, k2: Any, r: Any) -> Any:
+    """``r / k1``."""
+    return r / k1
+
+
+def quadratic(k1: Any, k2: Any, s: Any) -> Any:
+    """``k1 s^2`` (the paper's ``𝔩_i s^2``)."""
+    return k1 * (s * s)
+
+
+def quadratic_inverse(k1: Any, k2: Any, r: Any) -> Any:
+    """``sqrt(r / k1)``."""
+    return (r / k1) ** 0.5
+
+
+def power(k1: Any, k2: Any, s: Any) -> Any:
+    """``k1 s^k2``."""
+    return k1 * s**k2
+
+
+def power_inverse(k1: Any, k2: Any, r: Any) -> Any:
+    """``(r / k1)^(1 / k2)``."""
+    return (r / k1) ** (1.0 / k2)
+
+
+def constant(k1: Any, k2: Any, s: Any) -> Any:
+    """The constant ``k1`` (same shape as ``s``): a weight ``d'`` given as a number."""
+    return k1 + 0.0 * s
+
+
+@dataclass(frozen=True)
+class KKind:
+    """A kind of K-function: ``value(k1, k2, s)`` with its one or two numbers ``k1, k2``.
+
+    Attributes
+    ----------
+    name : str
+        How specs name it (``["linear", 2.0]`` in a sensor spec).
+    numbers : tuple of Number
+        Its numbers, in the order of ``k1, k2``.
+    value, inverse : callable
+        The function and its inverse, ``(k1, k2, s) -> r``, on floats or arrays.
+    text : str
+        How it prints, formatted with its numbers by name (``"{a:g}*s"``).
+
+    """
+
+    name: str
+    numbers: tuple[Number, ...]
+    value: Callable[[Any, Any, Any], Any]
+    inverse: Callable[[Any, Any, Any], Any] | None
+    text: str
+
+
+LINEAR = KKind("linear", (Number("a", **_POSITIVE),), linear, linear_inverse, "{a:g}*s")
+QUADRATIC = KKind("quadratic", (Number("ell", **_POSITIVE),), quadratic, quadratic_inverse, "{ell:g}*s^2")
+POWER = KKind(
+    "power", (Number("k", **_POSITIVE), Number("p", **_POSITIVE)), power, power_inverse, "{k:g}*s^{p:g}"
+)
+#: Not a class-K function: the constant weight ``d'`` of the generalized rule given as a number.
+CONSTANT = KKind("constant", (Number("value", **_POSITIVE),), constant, None, "{value:g}")
+
+#: The K-function kinds by name: what a spec may write and the engine compiles.
+K_KINDS: dict[str, KKind] = {k.name: k for k in (LINEAR, QUADRATIC, POWER, CONSTANT)}
+
+
+def k_kind(name: object) -> KKind:
+    """The K-function kind called ``name``.
+
+    Raises
+    ------
+    InputError
+        For a name no kind has (there is no fallback).
+
+    """
+    kind = K_KINDS.get(name) if isinstance(name, str) else None
+    if kind is None:
+        raise InputError(f"unknown K-function kind {name!r}; the kinds are {', '.join(K_KINDS)}")
+    return kind
+
+
+def k_value(kind: str, k1: Any, k2: Any, s: Any) -> Any:
+    """The K-function of kind ``kind`` (a name) with numbers ``k1, k2`` at ``s`` (a float or an array)."""
+    return k_kind(kind).value(k1, k2, s)
+
+
+# ---- rules ---------------------------------------------------------------------------
 
 
 def dynamic_flow(gamma_e: Any, alpha_eta: Any, c: float) -> Any:
@@ -61,6 +192,16 @@ def relative_trigger(e: Any, y: Any, rho: float, eps: float) -> Any:
     return e - rho * y - eps
 
 
+def clock_flow() -> float:
+    """``tau' = 1``: a clock."""
+    return 1.0
+
+
+def clock_reset() -> float:
+    """``tau+ = 0`` at the node's own transmission."""
+    return 0.0
+
+
 def periodic_trigger(tau: Any, period: float) -> Any:
     """``tau - period``: the clock ``tau`` (``tau' = 1``, reset to 0) reaches the period."""
     return tau - period
@@ -82,26 +223,188 @@ def generalized_trigger(
     return gamma_e + weight * gamma_check_e - sigma * weight * alpha_check_eta - eps
 
 
-def eta_after_period(
-    eta: float, forcing: float, alpha_kind: int, a1: float, a2: float, period: float
-) -> float:
-    """``eta`` after one sampling period of ``eta' = -alpha(eta) + forcing``, ``forcing`` held.
+@dataclass(frozen=True)
+class Formula:
+    """A formula of a rule and the names of its arguments, in order (module docstring)."""
 
-    Exact for ``alpha(s) = a1 s``; otherwise 20 classical Runge--Kutta substeps (local
-    error ``O((T/20)^5)``), with ``eta`` kept ``>= 0``.
+    fn: Callable[..., Any]
+    args: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A K-function slot of a rule; ``constant`` when a positive number may stand for it."""
+
+    name: str
+    constant: bool = False
+
+
+@dataclass(frozen=True)
+class RuleKind:
+    """A kind of triggering rule: its numbers, K-function slots, state and formulas.
+
+    Attributes
+    ----------
+    name : str
+        How specs name it (``kind = "dynamic"``).
+    numbers : tuple of Number
+        The numbers its formulas read, in the order the engine stores them.
+    slots : tuple of Slot
+        Its K-function slots (``gamma``, ``alpha`` ...).
+    state : {"none", "eta", "clock"}
+        Its scalar state: none, a filter ``eta`` (initial value ``eta0``, ``>= 0``) or a
+        clock (initial value ``period - first``).
+    trigger : Formula
+        The trigger function: the node sends when it is ``>= 0``.
+    flow, reset : Formula or None
+        The state's derivative along flows and its value after the node's own
+        transmission (``None`` without a state).
+    decay : str or None
+        For an ``eta`` state whose flow is ``-K(eta) + F(|e|)``, the slot of ``K``: a sensor
+        node solves the flow exactly over a sampling period when that K-function is linear.
+    period : str or None
+        For a clock, the number that is its period (a sensor node counts samples).
+
     """
-    if alpha_kind == LINEAR:
-        decay = math.exp(-a1 * period)
-        return decay * eta + forcing * (1.0 - decay) / a1
+
+    name: str
+    numbers: tuple[Number, ...]
+    slots: tuple[Slot, ...]
+    state: str
+    trigger: Formula
+    flow: Formula | None = None
+    reset: Formula | None = None
+    decay: str | None = None
+    period: str | None = None
+
+    @property
+    def initial(self) -> str | None:
+        """The name of the number that sets the initial state (``eta0``, ``first``), if any."""
+        return {"eta": "eta0", "clock": "first"}.get(self.state)
+
+    @property
+    def reads_y(self) -> bool:
+        """Whether a formula reads the current measurement ``|ytilde_i|``."""
+        return any("y" in f.args for f in self.formulas())
+
+    def formulas(self) -> tuple[Formula, ...]:
+        """The kind's formulas: trigger, then flow and reset when it has a state."""
+        return tuple(f for f in (self.trigger, self.flow, self.reset) if f is not None)
+
+    def number_names(self) -> tuple[str, ...]:
+        """The names of its numbers."""
+        return tuple(n.name for n in self.numbers)
+
+
+_SIGMA = Number("sigma", lower=0.0)
+_C = Number("c", lower=0.0)
+_B = Number("b", lower=0.0, upper=1.0)
+_EPS = Number("eps", **_POSITIVE)
+
+DYNAMIC = RuleKind(  # eq. (14)-(15)
+    "dynamic",
+    (_SIGMA, _C, _B, _EPS),
+    (Slot("gamma"), Slot("alpha")),
+    "eta",
+    trigger=Formula(dynamic_trigger, ("gamma(e)", "alpha(s)", "sigma", "eps")),
+    flow=Formula(dynamic_flow, ("gamma(e)", "alpha(s)", "c")),
+    reset=Formula(eta_reset, ("s", "b")),
+    decay="alpha",
+)
+STATIC = RuleKind("static", (_EPS,), (Slot("gamma"),), "none", Formula(static_trigger, ("gamma(e)", "eps")))
+PERIODIC = RuleKind(
+    "periodic",
+    (Number("period", **_POSITIVE),),
+    (),
+    "clock",
+    trigger=Formula(periodic_trigger, ("s", "period")),
+    flow=Formula(clock_flow, ()),
+    reset=Formula(clock_reset, ()),
+    period="period",
+)
+RELATIVE = RuleKind(
+    "relative",
+    (Number("rho", **_POSITIVE), _EPS),
+    (),
+    "none",
+    Formula(relative_trigger, ("e", "y", "rho", "eps")),
+)
+GENERALIZED = RuleKind(  # section 7.1, eq. (44)-(45)
+    "generalized",
+    (Number("sigma", lower=0.0, upper=1.0, lower_open=True, upper_open=True), _B, _EPS),
+    (Slot("gamma"), Slot("gamma_check"), Slot("alpha_check"), Slot("d_prime", constant=True)),
+    "eta",
+    trigger=Formula(
+        generalized_trigger, ("gamma(e)", "d_prime(s)", "gamma_check(e)", "alpha_check(s)", "sigma", "eps")
+    ),
+    flow=Formula(generalized_flow, ("gamma_check(e)", "alpha_check(s)")),
+    reset=Formula(eta_reset, ("s", "b")),
+    decay="alpha_check",
+)
+
+#: The rule kinds by name: what a spec may write and the engine compiles.
+RULE_KINDS: dict[str, RuleKind] = {k.name: k for k in (DYNAMIC, STATIC, PERIODIC, RELATIVE, GENERALIZED)}
+
+
+def rule_kind(name: object) -> RuleKind:
+    """The rule kind called ``name``.
+
+    Raises
+    ------
+    InputError
+        For a name no kind has (there is no fallback).
+
+    """
+    kind = RULE_KINDS.get(name) if isinstance(name, str) else None
+    if kind is None:
+        raise InputError(f"unknown rule kind {name!r}; the kinds are {', '.join(RULE_KINDS)}")
+    return kind
+
+
+def split_arg(arg: str) -> tuple[str, str] | None:
+    """``"gamma(e)"`` -> ``("gamma", "e")``; ``None`` for an argument that is not a K-function's."""
+    if not arg.endswith(")") or "(" not in arg:
+        return None
+    slot, _, at = arg[:-1].partition("(")
+    return slot, at
+
+
+def evaluate(formula: Formula, value: Callable[[str], Any]) -> Any:
+    """``formula`` applied to its arguments, each given by ``value(name)``."""
+    return formula.fn(*(value(a) for a in formula.args))
+
+
+# ---- integration over a sampling period ----------------------------------------------
+
+
+def rk4_step(f: Callable[[float, Any], Any], t: float, y: Any, h: float) -> Any:
+    """One classical Runge--Kutta step of ``y' = f(t, y)`` from ``(t, y)``: ``y(t + h)``.
+
+    ``y`` is a float or an array; the one fixed-step integrator of etobs (the sensor's
+    filter, the observer service).
+    """
+    k1 = f(t, y)
+    k2 = f(t + h / 2, y + h / 2 * k1)
+    k3 = f(t + h / 2, y + h / 2 * k2)
+    k4 = f(t + h, y + h * k3)
+    return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def eta_after_period(eta: float, flow: Callable[[float], float], period: float, rate: float | None) -> float:
+    """``eta`` after one sampling period of ``eta' = flow(eta)``, the measurement held.
+
+    When ``flow(eta) = -rate eta + flow(0)`` (a linear decay, ``rate`` given), exact:
+    ``exp(-rate T) eta + flow(0) (1 - exp(-rate T)) / rate``. Otherwise 20 classical
+    Runge--Kutta substeps (local error ``O((T/20)^5)``), with ``eta`` kept ``>= 0``.
+    """
+    if rate is not None:
+        decay = math.exp(-rate * period)
+        return decay * eta + flow(0.0) * (1.0 - decay) / rate
     h = period / 20
 
-    def f(s: float) -> float:
-        return -k_value(alpha_kind, a1, a2, max(s, 0.0)) + forcing
+    def f(t: float, s: float) -> float:
+        return flow(max(s, 0.0))
 
-    for _ in range(20):
-        k1 = f(eta)
-        k2 = f(eta + 0.5 * h * k1)
-        k3 = f(eta + 0.5 * h * k2)
-        k4 = f(eta + h * k3)
-        eta += h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+    for k in range(20):
+        eta = rk4_step(f, k * h, eta, h)
     return max(eta, 0.0)

@@ -73,7 +73,10 @@ def test_periodic_static_relative():
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ({"kind": "magic"}, r"`kind` must be dynamic, static, periodic or relative; got 'magic'"),
+        (
+            {"kind": "magic"},
+            r"`kind` must be one of dynamic, static, periodic, relative, generalized; got 'magic'",
+        ),
         (DYN | {"gamma": ["cubic", 1.0]}, r"`gamma` must be \['linear', a\]"),
         (DYN | {"sigma": -1.0}, r"`sigma` must be >= 0; got -1.0"),
         ({k: v for k, v in DYN.items() if k != "eps"}, r"missing key `eps`"),
@@ -105,13 +108,20 @@ def test_fine_sampling_approaches_the_continuous_rule():
 
 def test_sensor_spec_refuses_what_a_node_cannot_run():
     from etobs.errors import InputError
-    from etobs.model import Custom, GeneralizedRule, Linear, Quadratic, StaticRule
+    from etobs.model import Custom, Linear, StaticRule
+    from etobs.model.rules import StatelessRule
+
+    class Own(StatelessRule):
+        def trigger(self, t, e, s, y=None):
+            return np.abs(e[:, 0]) - 1.0
 
     assert robot_arm().nodes[0].rule.sensor_spec()["gamma"] == ["quadratic", 5.0]
     with pytest.raises(
-        InputError, match=r"a sensor node runs DynamicRule, StaticRule, RelativeRule or PeriodicRule"
+        InputError,
+        match=r"a sensor node runs the rules of etobs' kinds \(dynamic, static, periodic, relative, "
+        r"generalized\); got Own, a rule of your own",
     ):
-        GeneralizedRule(gamma=Quadratic(1.0), gamma_check=Quadratic(1.0)).sensor_spec()
+        Own().sensor_spec()
     with pytest.raises(InputError, match=r"`gamma` is Custom"):
         StaticRule(gamma=Custom(lambda s: s, name="id"), eps=1.0).sensor_spec()
     assert StaticRule(gamma=Linear(2.0), eps=1.0).sensor_spec() == {

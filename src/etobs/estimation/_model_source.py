@@ -28,9 +28,8 @@ from etobs import formulas as fm
 from etobs.compile.functions import FunctionSpec
 from etobs.estimation import _network_jumps
 from etobs.estimation.calls import model_specs
-from etobs.formulas import CONSTANT, CUSTOM
 from etobs.model.fates import LINK_WIDTH
-from etobs.model.rules import DYNAMIC, GENERALIZED, PERIODIC, RELATIVE, STATIC, EngineForm
+from etobs.model.rules import EngineForm
 from etobs.model.signals import CONSTANT as SIG_CONSTANT
 from etobs.model.signals import FUNCTION as SIG_FUNCTION
 from etobs.model.signals import SINUSOID as SIG_SINUSOID
@@ -52,27 +51,25 @@ FUNCTIONS = (
     "signal m",
 )
 S_FP, S_H, S_FO, S_PSI, S_SIG = 4, 5, 6, 7, 8
-KSLOTS = ("gamma", "alpha", "gamma_check", "d_prime")
-G, A, GC, D = 0, 1, 2, 3
-#: Offsets of a rule's numbers in its block of ``p``; then two numbers per K-function slot.
-RULE_NUMBERS = ("sigma", "c", "b", "eps", "rho", "period")
-P_SIGMA, P_C, P_B, P_EPS, P_RHO, P_PERIOD = range(len(RULE_NUMBERS))
-P_F = len(RULE_NUMBERS)
-RULE_W = P_F + 2 * len(KSLOTS)
 
-#: The rule arithmetic the generated code calls, by global name: the one implementation
-#: in :mod:`etobs.formulas` (numba compiles and inlines it).
-FORMULAS = {
-    "K_VALUE": fm.k_value,
-    "DYN_FLOW": fm.dynamic_flow,
-    "DYN_TRIGGER": fm.dynamic_trigger,
-    "ETA_RESET": fm.eta_reset,
-    "STATIC_TRIGGER": fm.static_trigger,
-    "REL_TRIGGER": fm.relative_trigger,
-    "PER_TRIGGER": fm.periodic_trigger,
-    "GEN_FLOW": fm.generalized_flow,
-    "GEN_TRIGGER": fm.generalized_trigger,
-}
+
+def _helpers() -> dict[str, Callable[..., Any]]:
+    """The kinds' formulas the generated code calls, by global name (``K_LINEAR``, ``R_DYNAMIC_TRIGGER``).
+
+    The one implementation of each in :mod:`etobs.formulas` (numba compiles and inlines it).
+    """
+    out: dict[str, Callable[..., Any]] = {f"K_{k.name.upper()}": k.value for k in fm.K_KINDS.values()}
+    for kind in fm.RULE_KINDS.values():
+        for what in ("trigger", "flow", "reset"):
+            formula = getattr(kind, what)
+            if formula is not None:
+                out[_formula_name(kind, what)] = formula.fn
+    return out
+
+
+def _formula_name(kind: fm.RuleKind, what: str) -> str:
+    """The global name of the formula ``what`` (trigger, flow, reset) of ``kind``."""
+    return f"R_{kind.name.upper()}_{what.upper()}"
 
 
 @dataclass
@@ -149,7 +146,7 @@ class _Node:
     mw: tuple[int, ...]
     s0: int  # index of its rule state in q (-1: none)
     p0: int  # offset of its numbers in p
-    kforms: tuple[tuple[int, str | None] | None, ...]  # per slot: (kind, user global or None)
+    kforms: tuple[tuple[str, str | None], ...]  # per slot of its kind: (K kind's name or "", user global)
 
     @property
     def size(self) -> int:
@@ -230,7 +227,7 @@ def _groups(nodes: list[_Node]) -> list[_Group]:
     """The nodes grouped by kind, in the order of their first node."""
     keyed: dict[tuple[Any, ...], list[_Node]] = {}
     for nd in nodes:
-        keyed.setdefault((nd.form.kind, nd.kforms, nd.size), []).append(nd)
+        keyed.setdefault((nd.form.kind.name, nd.kforms, nd.size), []).append(nd)
     return [_Group(g, tuple(members)) for g, members in enumerate(keyed.values())]
 
 
@@ -265,7 +262,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     """
     pl, ob, lay = problem.plant, problem.observer, problem.layout
     src = ModelSource()
-    src.helpers.update(FORMULAS)
+    src.helpers.update(_helpers())
     nx, nz, ny, nu, nv = pl.n_x, ob.n_z, pl.n_y, pl.n_u, pl.n_v
     tp = src.put(pl.params)
     to = src.put(ob.params)
@@ -388,24 +385,24 @@ def _network_tables(channels: Any, network: int) -> list[str]:
 
 
 def _node(src: ModelSource, c: int, ch: Any, form: EngineForm, w: dict[str, int], innovation: bool) -> _Node:
-    """Node ``c``'s numbers into ``p`` and its user K-functions into ``src``."""
-    numbers = np.zeros(RULE_W)
-    for key, val in form.numbers.items():
-        numbers[RULE_NUMBERS.index(key)] = val
-    kforms: list[tuple[int, str | None] | None] = []
-    for slot, fn in enumerate(form.kfunctions):
-        if fn is None:
-            kforms.append(None)
-            continue
+    """Node ``c``'s numbers into ``p`` and its user K-functions into ``src``.
+
+    Its block of ``p``: the kind's numbers in order, then two numbers per K-function slot.
+    """
+    kind = form.kind
+    numbers = [form.numbers[n.name] for n in kind.numbers]
+    kforms: list[tuple[str, str | None]] = []
+    for slot in kind.slots:
+        fn = form.kfunctions[slot.name]
         if isinstance(fn, float | int):
-            kind, k1, k2, user = CONSTANT, float(fn), 0.0, None
+            kk, k1, k2, user = fm.CONSTANT, float(fn), 0.0, None
         else:
-            kind, k1, k2, user = fn.engine_form()
-        numbers[P_F + 2 * slot : P_F + 2 * slot + 2] = k1, k2
+            kk, k1, k2, user = fn.engine_form()
+        numbers += [k1, k2]
         glob = None
         if user is not None:
-            glob = src.user(user, f"K{c}_{slot}", f"{KSLOTS[slot]} of node {c}", FunctionSpec("t", (), 0))
-        kforms.append((kind, glob))
+            glob = src.user(user, f"K{c}_{slot.name}", f"{slot.name} of node {c}", FunctionSpec("t", (), 0))
+        kforms.append(("" if kk is None else kk.name, glob))
     index = [int(k) for k in ch.index]
     if ch.kind == "u":  # an input node sends u_k (section 7.3)
         sw = mw = tuple(w["u"] + k for k in index)
@@ -475,22 +472,11 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
     _prelude(c, at, flow=True)
     for grp in groups:
         kind = grp.first.form.kind
-        if kind not in (DYNAMIC, GENERALIZED, PERIODIC):
+        if kind.flow is None:
             continue
         c.lines(grp.loop())
         c.indent()
-        if kind == PERIODIC:
-            c.line("dq[s0] = 1.0")
-        else:
-            # eq. (14): eta' = -alpha(eta) + c gamma(|e|); eq. (44): -alpha_check(eta) + gamma_check(|e|)
-            c.lines(grp.norm("jj", False, "e"))
-            c.lines(_kcall(grp, A, "q[s0]", "av"))
-            if kind == DYNAMIC:
-                c.lines(_kcall(grp, G, "e", "gv"))
-                c.line(f"dq[s0] = DYN_FLOW(gv, av, p[r + {P_C}])")
-            else:
-                c.lines(_kcall(grp, GC, "e", "gv"))
-                c.line("dq[s0] = GEN_FLOW(gv, av)")
+        c.line(f"dq[s0] = {_apply(c, grp, kind, 'flow')}")  # e.g. eq. (14), (44)
         c.dedent()
 
 
@@ -511,28 +497,7 @@ def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.lines(grp.loop())
         c.indent()
         gi = f"g[{off} + i]" if off else "g[i]"
-        if kind == PERIODIC:
-            c.line(f"{gi} = PER_TRIGGER(q[s0], p[r + {P_PERIOD}])")
-        elif kind == RELATIVE:
-            c.lines(grp.norm("jj", False, "e"))
-            c.lines(grp.norm("jj", True, "ym"))
-            c.line(f"{gi} = REL_TRIGGER(e, ym, p[r + {P_RHO}], p[r + {P_EPS}])")
-        else:
-            c.lines(grp.norm("jj", False, "e"))
-            c.lines(_kcall(grp, G, "e", "gv"))
-            if kind == STATIC:
-                c.line(f"{gi} = STATIC_TRIGGER(gv, p[r + {P_EPS}])")
-            elif kind == DYNAMIC:
-                # eq. (15): gamma(|e|) >= sigma alpha(eta) + eps
-                c.lines(_kcall(grp, A, "q[s0]", "av"))
-                c.line(f"{gi} = DYN_TRIGGER(gv, av, p[r + {P_SIGMA}], p[r + {P_EPS}])")
-            else:
-                # eq. (45), read with >= (see GeneralizedRule):
-                # gamma(|e|) + d'(eta) gamma_check(|e|) >= sigma d'(eta) alpha_check(eta) + eps
-                c.lines(_kcall(grp, D, "q[s0]", "w"))
-                c.lines(_kcall(grp, GC, "e", "gc"))
-                c.lines(_kcall(grp, A, "q[s0]", "ac"))
-                c.line(f"{gi} = GEN_TRIGGER(gv, w, gc, ac, p[r + {P_SIGMA}], p[r + {P_EPS}])")
+        c.line(f"{gi} = {_apply(c, grp, kind, 'trigger')}")  # e.g. eq. (15), (45), (54)
         c.dedent()
 
 
@@ -555,10 +520,9 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.line("jj = JP[k]")
         c.lines(grp.locals("jj"))
         c.lines(grp.send("jj"))
-        if grp.first.form.kind in (DYNAMIC, GENERALIZED):
-            c.line(f"q[s0] = ETA_RESET(q[s0], p[r + {P_B}])")
-        elif grp.first.form.kind == PERIODIC:
-            c.line("q[s0] = 0.0")
+        kind = grp.first.form.kind
+        if kind.reset is not None:
+            c.line(f"q[s0] = {_apply(c, grp, kind, 'reset')}")  # e.g. eq. (14)
         c.dedent()
     if at.network >= 0:
         n = at.network
@@ -641,12 +605,41 @@ def _ytilde(at: _Where) -> list[str]:
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
 
 
-def _kcall(grp: _Group, slot: int, s: str, out: str) -> list[str]:
-    """``out = K(s)`` for K-function ``slot`` of the group's nodes."""
-    kform = grp.first.kforms[slot]
-    assert kform is not None, "the rule's kind uses this slot"
-    kind, glob = kform
-    r = P_F + 2 * slot
-    if kind == CUSTOM:
-        return [f"{out} = float({glob}({s}))"]
-    return [f"{out} = K_VALUE({kind}, p[r + {r}], p[r + {r + 1}], {s})"]
+def _apply(c: _Code, grp: _Group, kind: fm.RuleKind, what: str) -> str:
+    """The call of ``kind``'s formula ``what`` for the group's node ``jj``; its arguments' lines into ``c``.
+
+    Each argument of the formula (:class:`etobs.formulas.Formula`) becomes a local:
+    ``|e_i|``, ``|ytilde_i|``, the rule state ``q[s0]``, a K-function's value or a number
+    of the node's block of ``p``.
+    """
+    formula = getattr(kind, what)
+    names = {n.name: i for i, n in enumerate(kind.numbers)}
+    slots = {slot.name: i for i, slot in enumerate(kind.slots)}
+    done: dict[str, str] = {"s": "q[s0]"}
+
+    def local(arg: str) -> str:
+        if arg in done:
+            return done[arg]
+        if arg in ("e", "y"):
+            out = "e" if arg == "e" else "ym"
+            c.lines(grp.norm("jj", arg == "y", out))
+        elif arg in names:
+            out = f"p[r + {names[arg]}]"
+        else:
+            split = fm.split_arg(arg)
+            if split is None or split[0] not in slots:
+                raise ValueError(f"rule kind {kind.name!r}: the argument {arg!r} of its {what} is unknown")
+            slot, at = split
+            j = slots[slot]
+            out = f"k_{slot}_{at}"
+            kname, glob = grp.first.kforms[j]
+            base = len(kind.numbers) + 2 * j
+            if glob is not None:
+                c.line(f"{out} = float({glob}({local(at)}))")
+            else:
+                c.line(f"{out} = K_{kname.upper()}(p[r + {base}], p[r + {base + 1}], {local(at)})")
+        done[arg] = out
+        return out
+
+    args = [local(a) for a in formula.args]
+    return f"{_formula_name(kind, what)}({', '.join(args)})"

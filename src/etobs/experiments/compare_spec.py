@@ -9,7 +9,7 @@ this parser. The tables shared with a sweep spec are parsed by
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import MISSING, dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, TypeVar
@@ -35,22 +35,48 @@ from etobs.model.network import (
     Network,
     UniformDelay,
 )
-from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
+from etobs.model.rules import KindRule, TriggerRule, rule_classes, send_on_delta
 
 _T = TypeVar("_T")
 
-#: Keys of each rule kind (besides ``name``, ``kind`` and ``observer_copy``).
+#: The rule classes of etobs by kind name: each a kind of :data:`etobs.formulas.RULE_KINDS`.
+RULE_CLASSES: dict[str, type[KindRule]] = rule_classes()
+
+
+def _kind_keys(cls: type[KindRule]) -> tuple[str, ...]:
+    """The keys a spec may give for a rule kind: its numbers and its initial state."""
+    kind = cls.kind
+    return kind.number_names() + ((kind.initial,) if kind.initial else ())
+
+
+def _carries(cls: type[KindRule]) -> bool:
+    """Whether a rule of ``cls`` built from a spec entry takes what it is not given from the base rule.
+
+    A kind with K-functions takes them from the base rule, and its numbers with them; a
+    kind without is built from the entry alone.
+    """
+    return bool(cls.kind.slots)
+
+
+def _required(kind: str) -> tuple[str, ...]:
+    """The keys an entry of ``kind`` must give: those it can take from nowhere else."""
+    if kind == "send_on_delta":
+        return ("delta",)
+    cls = RULE_CLASSES.get(kind)
+    if cls is None or _carries(cls):
+        return ()
+    own = {f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
+    return tuple(k for k in RULE_KINDS[kind] if k in own)
+
+
+#: Keys of each rule kind (besides ``name``, ``kind`` and ``observer_copy``): ``base``, the
+#: kinds of :data:`etobs.formulas.RULE_KINDS` and the preset ``send_on_delta``.
 RULE_KINDS: dict[str, tuple[str, ...]] = {
     "base": (),
-    "dynamic": ("sigma", "c", "b", "eps", "eta0"),
-    "static": ("eps",),
-    "periodic": ("period",),
-    "relative": ("rho", "eps"),
+    **{name: _kind_keys(cls) for name, cls in RULE_CLASSES.items()},
     "send_on_delta": ("delta",),
 }
 
-#: Keys a rule kind requires (besides ``name`` and ``kind``).
-_REQUIRED = {"periodic": ("period",), "relative": ("rho", "eps"), "send_on_delta": ("delta",)}
 #: What an entry's name and a rule's number expect, in a missing key's error.
 _NAME = "a non-empty string"
 _PER_NODE = "a number (every node) or a list of numbers (one per node)"
@@ -79,40 +105,40 @@ class RuleEntry:
         return float(_number(where, raw))
 
     def make(self, node: int, n_nodes: int, base: TriggerRule) -> TriggerRule:
-        """The rule of this entry for ``node``, whose base rule is ``base``."""
+        """The rule of this entry for ``node``, whose base rule is ``base``.
+
+        The kind's K-functions are the base rule's of the same slot name (``gamma``). A
+        number the entry does not give is the base rule's of that name when the kind takes
+        K-functions from it (so it means the same: ``eps`` of ``static`` on a dynamic base),
+        else the class default; one with neither is an error naming the key.
+        """
         p = {k: self.value(k, node, n_nodes) for k in self.params}
         try:
             if self.kind == "base":
                 return base
-            if self.kind == "dynamic":
-                if not isinstance(base, DynamicRule):
-                    raise SpecError(
-                        f"`{self.where}`: kind 'dynamic' changes a DynamicRule, but node {node}'s "
-                        f"base rule is a {type(base).__name__}"
+            if self.kind == "send_on_delta":
+                return send_on_delta(p["delta"])
+            cls = RULE_CLASSES[self.kind]
+            args: dict[str, Any] = {}
+            slots = {slot.name for slot in cls.kind.slots}
+            for f in fields(cls):
+                if f.name in p:
+                    args[f.name] = p[f.name]
+                elif hasattr(base, f.name) and (f.name in slots or _carries(cls)):
+                    args[f.name] = getattr(base, f.name)
+                elif f.default is MISSING and f.default_factory is MISSING:
+                    shown_as = (
+                        f"`{self.where}.{f.name}`" if f.name in RULE_KINDS[self.kind] else f"`{f.name}`"
                     )
-                return replace(base, **p)
-            if self.kind == "static":
-                gamma = getattr(base, "gamma", None)
-                if gamma is None:
                     raise SpecError(
-                        f"`{self.where}`: kind 'static' takes gamma from the base rule, but node "
-                        f"{node}'s {type(base).__name__} has none"
+                        f"{shown_as} is missing: kind {self.kind!r} needs it and node {node}'s base rule "
+                        f"{type(base).__name__} has none"
                     )
-                eps = p.get("eps", getattr(base, "eps", None))
-                if eps is None:
-                    raise SpecError(f"`{self.where}.eps` is missing (the base rule has none)")
-                return StaticRule(gamma=gamma, eps=eps)
-            if self.kind == "periodic":
-                return PeriodicRule(p["period"])
-            if self.kind == "relative":
-                return RelativeRule(rho=p["rho"], eps=p["eps"])
-            return send_on_delta(p["delta"])
+            return cls(**args)
         except SpecError:
             raise
         except EtobsError as exc:
             raise SpecError(f"`{self.where}`, node {node}: {exc}") from exc
-        except (KeyError, TypeError) as exc:
-            raise SpecError(f"`{self.where}`: missing or wrong parameter ({exc})") from exc
 
     def apply(self, base: EstimationProblem, network: Network | None) -> EstimationProblem:
         """The base problem with this rule on every output node, and ``network``."""
@@ -271,7 +297,7 @@ def _rule(where: str, table: Any) -> RuleEntry:
     kind = table.get("kind")
     if not isinstance(kind, str) or kind not in RULE_KINDS:
         raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {shown(kind)}")
-    required = {"name": _NAME, "kind": "a rule kind"} | {k: _PER_NODE for k in _REQUIRED.get(kind, ())}
+    required = {"name": _NAME, "kind": "a rule kind"} | {k: _PER_NODE for k in _required(kind)}
     t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy"})
     copy = t.get("observer_copy", False)
     if not isinstance(copy, bool):

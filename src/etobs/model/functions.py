@@ -3,10 +3,10 @@
 All act elementwise on arrays of non-negative reals. ``Linear(a)`` is ``a*s`` and
 ``Quadratic(ell)`` is ``ell*s**2`` (the paper's ``𝔩_i s^2``); :class:`Custom` wraps any
 user function of one float after a sanity check that it is zero at zero and increasing.
-Each knows its engine form (:meth:`KFunction.engine_form`): a kind code and two numbers,
-or the user's function to compile; the built-in ones are evaluated by
-:func:`etobs.formulas.k_value`, the one implementation the engine and the sensor nodes
-also run.
+Each knows its engine form (:meth:`KFunction.engine_form`): its kind and two numbers, or
+the user's function to compile. The built-in ones are a kind of
+:data:`etobs.formulas.K_KINDS` (:class:`Builtin`): their formulas are the ones the
+engine and the sensor nodes also run.
 """
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
-from etobs.formulas import CUSTOM, LINEAR, POWER, QUADRATIC, SENSOR_NAMES, k_value
+from etobs.formulas import K_KINDS, LINEAR, POWER, QUADRATIC, KKind
 
 
 class KFunction(ABC):
@@ -35,88 +35,94 @@ class KFunction(ABC):
         """Evaluate the inverse function elementwise."""
 
     @abstractmethod
-    def engine_form(self) -> tuple[int, float, float, Callable[[float], float] | None]:
-        """``(kind, k1, k2, fn)``: the kind code, its two numbers, the function to compile or None."""
+    def engine_form(self) -> tuple[KKind | None, float, float, Callable[[float], float] | None]:
+        """``(kind, k1, k2, fn)``: its kind and numbers, or ``None`` and the user function to compile."""
 
     def sensor_spec(self, what: str) -> list[Any]:
         """The function as a sensor node's rule spec gives it (``["linear", a]`` ...).
 
         ``what`` names it in the error for a function a sensor node does not run.
         """
-        kind, k1, k2, fn = self.engine_form()
-        names = {code: name for name, code in SENSOR_NAMES.items()}
-        if fn is not None or kind not in names:
-            raise InputError(
-                f"a sensor node runs Linear, Quadratic or Power functions; `{what}` is {type(self).__name__}"
-            )
-        return [names[kind], k1] if kind != POWER else [names[kind], k1, k2]
-
-
-class _Builtin(KFunction):
-    """A K-function of a kind :func:`etobs.formulas.k_value` evaluates."""
-
-    def __call__(self, s: np.ndarray) -> np.ndarray:
         kind, k1, k2, _ = self.engine_form()
-        return k_value(kind, k1, k2, np.asarray(s, dtype=float))
+        if kind is None:
+            raise InputError(
+                f"a sensor node runs the K-functions of etobs' kinds ({', '.join(K_KINDS)}); "
+                f"`{what}` is {type(self).__name__}"
+            )
+        return [kind.name, k1, k2][: 1 + len(kind.numbers)]
 
 
 @dataclass(frozen=True)
-class Linear(_Builtin):
+class Builtin(KFunction):
+    """A K-function of a kind of :data:`etobs.formulas.K_KINDS`: its fields are the kind's numbers.
+
+    A subclass is a frozen dataclass that sets ``kind`` and has one field per number of
+    the kind, in order; validation, evaluation, inverse, printing and every other form
+    come from the kind (:mod:`etobs.formulas`).
+    """
+
+    kind: ClassVar[KKind]
+
+    def __post_init__(self) -> None:
+        for n in self.kind.numbers:
+            object.__setattr__(self, n.name, v.real(n.name, getattr(self, n.name), **n.limits()))
+
+    def _numbers(self) -> tuple[float, float]:
+        vals = [float(getattr(self, n.name)) for n in self.kind.numbers]
+        return vals[0], vals[1] if len(vals) > 1 else 0.0
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        k1, k2 = self._numbers()
+        return self.kind.value(k1, k2, np.asarray(s, dtype=float))  # type: ignore[no-any-return]
+
+    def inverse(self, r: np.ndarray) -> np.ndarray:
+        if self.kind.inverse is None:
+            raise InputError(f"{type(self).__name__} has no inverse")
+        k1, k2 = self._numbers()
+        return self.kind.inverse(k1, k2, np.asarray(r, dtype=float))  # type: ignore[no-any-return]
+
+    def engine_form(self) -> tuple[KKind, float, float, None]:
+        return (self.kind, *self._numbers(), None)
+
+    def __str__(self) -> str:
+        return self.kind.text.format(**{n.name: getattr(self, n.name) for n in self.kind.numbers})
+
+
+@dataclass(frozen=True)
+class Linear(Builtin):
     """``a * s`` with ``a > 0``."""
 
     a: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "a", v.real("a", self.a, lower=0.0, lower_open=True))
-
-    def inverse(self, r: np.ndarray) -> np.ndarray:
-        return np.asarray(r) / self.a
-
-    def engine_form(self) -> tuple[int, float, float, None]:
-        return LINEAR, self.a, 0.0, None
-
-    def __str__(self) -> str:
-        return f"{self.a:g}*s"
+    kind: ClassVar[KKind] = LINEAR
 
 
 @dataclass(frozen=True)
-class Quadratic(_Builtin):
+class Quadratic(Builtin):
     """``ell * s**2`` with ``ell > 0`` (the paper's ``𝔩 s²``)."""
 
     ell: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "ell", v.real("ell", self.ell, lower=0.0, lower_open=True))
-
-    def inverse(self, r: np.ndarray) -> np.ndarray:
-        return np.sqrt(np.asarray(r) / self.ell)
-
-    def engine_form(self) -> tuple[int, float, float, None]:
-        return QUADRATIC, self.ell, 0.0, None
-
-    def __str__(self) -> str:
-        return f"{self.ell:g}*s^2"
+    kind: ClassVar[KKind] = QUADRATIC
 
 
 @dataclass(frozen=True)
-class Power(_Builtin):
+class Power(Builtin):
     """``k * s**p`` with ``k > 0`` and ``p > 0``."""
 
     k: float
     p: float
+    kind: ClassVar[KKind] = POWER
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "k", v.real("k", self.k, lower=0.0, lower_open=True))
-        object.__setattr__(self, "p", v.real("p", self.p, lower=0.0, lower_open=True))
 
-    def inverse(self, r: np.ndarray) -> np.ndarray:
-        return np.power(np.asarray(r) / self.k, 1.0 / self.p)
-
-    def engine_form(self) -> tuple[int, float, float, None]:
-        return POWER, self.k, self.p, None
-
-    def __str__(self) -> str:
-        return f"{self.k:g}*s^{self.p:g}"
+def k_classes() -> dict[str, type[Builtin]]:
+    """The K-function classes of etobs by kind name (the kinds of :data:`etobs.formulas.K_KINDS`)."""
+    out: dict[str, type[Builtin]] = {}
+    todo = list(Builtin.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        if "kind" in cls.__dict__ and cls.__module__.startswith("etobs."):
+            out[cls.kind.name] = cls
+    return {name: out[name] for name in K_KINDS if name in out}
 
 
 _PROBE = np.array([0.0, 1e-3, 0.1, 1.0, 10.0, 1e3])
@@ -171,8 +177,8 @@ class Custom(KFunction):
         arr = np.asarray(s, dtype=float)
         return np.array([float(self.fn(float(x))) for x in arr.reshape(-1)]).reshape(arr.shape)
 
-    def engine_form(self) -> tuple[int, float, float, Callable[[float], float]]:
-        return CUSTOM, 0.0, 0.0, self.fn
+    def engine_form(self) -> tuple[None, float, float, Callable[[float], float]]:
+        return None, 0.0, 0.0, self.fn
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         if self.inv is not None:

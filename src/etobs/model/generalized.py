@@ -14,17 +14,17 @@ then ``U = V + sum_i d_i(eta_i)`` (section 7.1).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
-from etobs import _validate as v
 from etobs import formulas as fm
-from etobs.model.functions import KFunction, Linear, as_kfunction
-from etobs.model.rules import GENERALIZED, EngineForm, EtaRule, _norm
+from etobs.model.functions import KFunction, Linear
+from etobs.model.rules import KindRule
 
 
 @dataclass(frozen=True)
-class GeneralizedRule(EtaRule):
+class GeneralizedRule(KindRule):
     """Section 7.1's rule: any ``alpha_check``, ``gamma_check`` and weight ``d'``.
 
     Parameters
@@ -68,40 +68,10 @@ class GeneralizedRule(EtaRule):
     b: float = 1.0
     eta0: float = 0.0
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
-        object.__setattr__(self, "alpha_check", as_kfunction("alpha_check", self.alpha_check))
-        object.__setattr__(self, "gamma_check", as_kfunction("gamma_check", self.gamma_check))
-        if isinstance(self.d_prime, int | float) and not isinstance(self.d_prime, bool):
-            object.__setattr__(self, "d_prime", v.real("d_prime", self.d_prime, lower=0.0, lower_open=True))
-        else:
-            object.__setattr__(self, "d_prime", as_kfunction("d_prime", self.d_prime))
-        object.__setattr__(
-            self, "sigma", v.real("sigma", self.sigma, lower=0.0, upper=1.0, lower_open=True, upper_open=True)
-        )
-        self._check_eta_params()
+    kind: ClassVar[fm.RuleKind] = fm.GENERALIZED
 
     def weight(self, eta: np.ndarray) -> np.ndarray:
         """``d'(eta)``."""
         if isinstance(self.d_prime, float):
-            return np.full_like(eta, self.d_prime)
+            return np.asarray(fm.constant(self.d_prime, 0.0, np.asarray(eta, dtype=float)))
         return self.d_prime(eta)
-
-    def derivative(
-        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
-    ) -> np.ndarray:
-        return fm.generalized_flow(self.gamma_check(_norm(e)), self.alpha_check(s[:, 0]))[:, None]  # (44)
-
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        # eq. (45), read with >= (see etobs.formulas.generalized_trigger)
-        eta, r = s[:, 0], _norm(e)
-        w = self.weight(eta)
-        return fm.generalized_trigger(
-            self.gamma(r), w, self.gamma_check(r), self.alpha_check(eta), self.sigma, self.eps
-        )
-
-    def engine_form(self) -> EngineForm:
-        numbers = {"sigma": self.sigma, "b": self.b, "eps": self.eps}
-        return EngineForm(
-            GENERALIZED, numbers, (self.gamma, self.alpha_check, self.gamma_check, self.d_prime)
-        )

@@ -15,11 +15,12 @@ All methods are vectorized over runs: ``t`` has shape ``(B,)``, ``e`` and ``y``
 rule that does not read it. An input node (section 7.3) runs the same rules on
 ``e_u = ubar - u``.
 
-Each rule knows its forms: these batched methods (for the scipy reference and for
-evaluating results), its engine form (:meth:`TriggerRule.engine_form`, compiled into the
-engine's model) and its sensor spec (:meth:`TriggerRule.sensor_spec`, the plain data a
-stdlib-only sensor node runs). All three compute with the one implementation of the
-formulas in :mod:`etobs.formulas`, so what you simulate is what you deploy.
+etobs' rules are each a kind of :data:`etobs.formulas.RULE_KINDS` (:class:`KindRule`):
+their batched methods (for the scipy reference and for evaluating results), their engine
+form (:meth:`TriggerRule.engine_form`, compiled into the engine's model) and their sensor
+spec (:meth:`TriggerRule.sensor_spec`, the plain data a stdlib-only sensor node runs) all
+derive from the kind's descriptor and compute with its one implementation of the
+formulas, so what you simulate is what you deploy.
 """
 
 from __future__ import annotations
@@ -35,22 +36,18 @@ from etobs import formulas as fm
 from etobs.errors import InputError
 from etobs.model.functions import KFunction, Linear, as_kfunction
 
-#: Rule kind codes of the engine form (see :mod:`etobs.estimation._model_source`).
-DYNAMIC, STATIC, PERIODIC, RELATIVE, GENERALIZED = 0, 1, 2, 3, 4
-
 
 @dataclass(frozen=True)
 class EngineForm:
-    """A rule as the engine runs it: its kind, its numbers and its K-functions.
+    """A rule as the engine runs it: its kind, its numbers and its K-functions by slot.
 
-    ``numbers`` maps ``sigma, c, b, eps, rho, period`` to values (those the kind uses);
-    ``kfunctions`` are the slots ``(gamma, alpha, gamma_check, d')``, ``None`` when unused,
-    a :class:`~etobs.model.functions.KFunction` or a constant.
+    ``numbers`` maps the kind's numbers to values; ``kfunctions`` maps its slots to a
+    :class:`~etobs.model.functions.KFunction` or a constant (a slot that allows one).
     """
 
-    kind: int
+    kind: fm.RuleKind
     numbers: dict[str, float]
-    kfunctions: tuple[Any, Any, Any, Any] = (None, None, None, None)
+    kfunctions: dict[str, KFunction | float]
 
 
 def _norm(e: np.ndarray) -> np.ndarray:
@@ -93,12 +90,7 @@ class TriggerRule(ABC):
         """Internal state right after the node's own transmission."""
 
     def engine_form(self) -> EngineForm | None:
-        """The rule as the engine runs it, or ``None`` for a rule the engine does not know.
-
-        Only a class that defines ``engine_form`` itself is run by the engine: a subclass
-        of a built-in rule that changes its trigger but not its engine form would
-        otherwise run as its parent (see :func:`engine_form_of`).
-        """
+        """The rule as the engine runs it, or ``None`` for a rule the engine does not know."""
         return None
 
     def sensor_spec(self) -> dict[str, Any]:
@@ -111,47 +103,157 @@ class TriggerRule(ABC):
 
         """
         raise InputError(
-            "a sensor node runs DynamicRule, StaticRule, RelativeRule or PeriodicRule; "
-            f"got {type(self).__name__}"
+            f"a sensor node runs the rules of etobs' kinds ({', '.join(fm.RULE_KINDS)}); "
+            f"got {type(self).__name__}, a rule of your own"
         )
 
 
 def engine_form_of(rule: TriggerRule) -> EngineForm | None:
-    """``rule.engine_form()`` when the rule's own class defines it, else ``None``."""
-    if "engine_form" not in type(rule).__dict__:
+    """``rule.engine_form()`` when the rule's own class declares its kind, else ``None``.
+
+    Only a class that declares ``kind`` itself is run by the engine: a subclass of a
+    built-in rule that changes its trigger would otherwise run as its parent.
+    """
+    if "kind" not in type(rule).__dict__:
         return None
     return rule.engine_form()
 
 
-class EtaRule(TriggerRule):
-    """Base of the rules with a scalar filter state ``eta`` reset as ``eta+ = b*eta``.
+class KindRule(TriggerRule):
+    """A rule of a kind of :data:`etobs.formulas.RULE_KINDS`: everything but its fields derives from the kind.
 
-    Subclasses are frozen dataclasses with fields ``b``, ``eps`` and ``eta0``.
+    A subclass is a frozen dataclass that sets ``kind`` and has one field per K-function
+    slot and per number of the kind (and ``eta0`` for a filter state, ``first`` for a
+    clock). Validation, the state, the batched methods (the reference solver's), the
+    engine form and the sensor spec are the kind's formulas (:mod:`etobs.formulas`).
     """
 
-    b: float
-    eps: float
-    eta0: float
+    kind: ClassVar[fm.RuleKind]
 
-    def _check_eta_params(self) -> None:
-        """Validate ``b`` in [0, 1], ``eps > 0`` and ``eta0 >= 0`` (frozen: set in place)."""
-        object.__setattr__(self, "b", v.real("b", self.b, lower=0.0, upper=1.0))
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
-        object.__setattr__(self, "eta0", v.real("eta0", self.eta0, lower=0.0))
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "kind" in cls.__dict__:
+            cls.reads_y = cls.kind.reads_y
+
+    def __post_init__(self) -> None:
+        for slot in self.kind.slots:
+            value = getattr(self, slot.name)
+            if slot.constant and isinstance(value, int | float) and not isinstance(value, bool):
+                value = v.real(slot.name, value, **fm.CONSTANT.numbers[0].limits())
+            else:
+                value = as_kfunction(slot.name, value)
+            object.__setattr__(self, slot.name, value)
+        for n in self.kind.numbers:
+            object.__setattr__(self, n.name, v.real(n.name, getattr(self, n.name), **n.limits()))
+        if self.kind.initial is not None:
+            name = self.kind.initial
+            object.__setattr__(self, name, v.real(name, getattr(self, name), lower=0.0))
 
     @property
     def n_state(self) -> int:
-        return 1
+        return 0 if self.kind.state == "none" else 1
 
     def initial_state(self) -> np.ndarray:
-        return np.array([self.eta0])
+        if self.kind.state == "eta":
+            return np.array([self.eta0])
+        if self.kind.state == "clock":
+            return np.array([getattr(self, self.kind.period or "") - self.first])
+        return np.empty(0)
+
+    def _values(self, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None) -> Any:
+        """The kind's arguments for a batch: ``|e|``, ``|y|``, the state, K-values, numbers."""
+        cache: dict[str, Any] = {}
+
+        def value(arg: str) -> Any:
+            if arg not in cache:
+                cache[arg] = self._value(arg, e, s, y, value)
+            return cache[arg]
+
+        return value
+
+    def _value(self, arg: str, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None, value: Any) -> Any:
+        if arg == "e":
+            assert e is not None
+            return _norm(e)
+        if arg == "y":
+            if y is None:
+                raise InputError(f"{type(self).__name__}.trigger needs the current measurement `y`; got None")
+            return _norm(y)
+        if arg == "s":
+            return s[:, 0]
+        split = fm.split_arg(arg)
+        if split is None:
+            return getattr(self, arg)
+        fn = getattr(self, split[0])
+        at = value(split[1])
+        if isinstance(fn, float):  # a constant slot
+            return fm.constant(fn, 0.0, at)
+        return fn(at)
+
+    def derivative(
+        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
+    ) -> np.ndarray:
+        if self.kind.flow is None:
+            return np.empty((t.shape[0], 0))
+        out = fm.evaluate(self.kind.flow, self._values(e, s, y))
+        return np.broadcast_to(np.asarray(out, dtype=float), (t.shape[0],))[:, None].copy()
+
+    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        return np.asarray(fm.evaluate(self.kind.trigger, self._values(e, s, y)))
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return fm.eta_reset(s, self.b)  # eq. (14)
+        if self.kind.reset is None:
+            return s
+        out = fm.evaluate(self.kind.reset, self._values(None, s, None))
+        return np.broadcast_to(np.asarray(out, dtype=float), (s.shape[0],))[:, None].copy()
+
+    def engine_form(self) -> EngineForm:
+        numbers = {n.name: float(getattr(self, n.name)) for n in self.kind.numbers}
+        return EngineForm(
+            self.kind, numbers, {slot.name: getattr(self, slot.name) for slot in self.kind.slots}
+        )
+
+    def sensor_spec(self) -> dict[str, Any]:
+        spec: dict[str, Any] = {"kind": self.kind.name}
+        for slot in self.kind.slots:
+            fn = getattr(self, slot.name)
+            spec[slot.name] = fn if isinstance(fn, float) else fn.sensor_spec(slot.name)
+        spec.update(self.engine_form().numbers)
+        if self.kind.initial is not None:
+            spec[self.kind.initial] = float(getattr(self, self.kind.initial))
+        return spec
+
+
+def rule_classes() -> dict[str, type[KindRule]]:
+    """The rule classes of etobs by kind name: each kind of :data:`etobs.formulas.RULE_KINDS` and its class.
+
+    Raises
+    ------
+    InputError
+        When a kind has no class or two (a kind must be declared with its class).
+
+    """
+    import etobs.model  # noqa: F401 - every class of etobs defined (the generalized rule's module too)
+
+    out: dict[str, type[KindRule]] = {}
+    todo = list(KindRule.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        if "kind" in cls.__dict__ and cls.__module__.startswith("etobs."):
+            if cls.kind.name in out:
+                raise InputError(
+                    f"rule kind {cls.kind.name!r} has two classes: {out[cls.kind.name]} and {cls}"
+                )
+            out[cls.kind.name] = cls
+    missing = set(fm.RULE_KINDS) - set(out)
+    if missing:
+        raise InputError(f"rule kinds without a class in etobs.model: {', '.join(sorted(missing))}")
+    return {name: out[name] for name in fm.RULE_KINDS}
 
 
 @dataclass(frozen=True)
-class DynamicRule(EtaRule):
+class DynamicRule(KindRule):
     """The paper's dynamic triggering rule, eq. (14)--(15).
 
     ``eta' = -alpha(eta) + c*gamma(|e|)`` along flows, ``eta+ = b*eta`` at the node's
@@ -192,41 +294,11 @@ class DynamicRule(EtaRule):
     b: float = 1.0
     eps: float = 1.0
     eta0: float = 0.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
-        object.__setattr__(self, "alpha", as_kfunction("alpha", self.alpha))
-        object.__setattr__(self, "sigma", v.real("sigma", self.sigma, lower=0.0))
-        object.__setattr__(self, "c", v.real("c", self.c, lower=0.0))
-        self._check_eta_params()
-
-    def derivative(
-        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
-    ) -> np.ndarray:
-        return fm.dynamic_flow(self.gamma(_norm(e)), self.alpha(s[:, 0]), self.c)[:, None]  # eq. (14)
-
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return fm.dynamic_trigger(self.gamma(_norm(e)), self.alpha(s[:, 0]), self.sigma, self.eps)  # (15)
-
-    def engine_form(self) -> EngineForm:
-        numbers = {"sigma": self.sigma, "c": self.c, "b": self.b, "eps": self.eps}
-        return EngineForm(DYNAMIC, numbers, (self.gamma, self.alpha, None, None))
-
-    def sensor_spec(self) -> dict[str, Any]:
-        return {
-            "kind": "dynamic",
-            "gamma": self.gamma.sensor_spec("gamma"),
-            "alpha": self.alpha.sensor_spec("alpha"),
-            "sigma": self.sigma,
-            "c": self.c,
-            "b": self.b,
-            "eps": self.eps,
-            "eta0": self.eta0,
-        }
+    kind: ClassVar[fm.RuleKind] = fm.DYNAMIC
 
 
 class StatelessRule(TriggerRule):
-    """Base of the rules without internal state: nothing flows, nothing is reset."""
+    """Base of rules of your own without internal state: nothing flows, nothing is reset."""
 
     @property
     def n_state(self) -> int:
@@ -245,7 +317,7 @@ class StatelessRule(TriggerRule):
 
 
 @dataclass(frozen=True)
-class StaticRule(StatelessRule):
+class StaticRule(KindRule):
     """Absolute-threshold rule ``gamma(|e|) >= eps`` (eq. (15) with ``sigma = 0``).
 
     It has no internal state; it transmits exactly when :class:`DynamicRule` with
@@ -254,19 +326,7 @@ class StaticRule(StatelessRule):
 
     gamma: KFunction
     eps: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gamma", as_kfunction("gamma", self.gamma))
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
-
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return fm.static_trigger(self.gamma(_norm(e)), self.eps)
-
-    def engine_form(self) -> EngineForm:
-        return EngineForm(STATIC, {"eps": self.eps}, (self.gamma, None, None, None))
-
-    def sensor_spec(self) -> dict[str, Any]:
-        return {"kind": "static", "gamma": self.gamma.sensor_spec("gamma"), "eps": self.eps}
+    kind: ClassVar[fm.RuleKind] = fm.STATIC
 
 
 def send_on_delta(delta: float) -> StaticRule:
@@ -282,7 +342,7 @@ def send_on_delta(delta: float) -> StaticRule:
 
 
 @dataclass(frozen=True)
-class PeriodicRule(TriggerRule):
+class PeriodicRule(KindRule):
     """Time-triggered baseline: transmit at ``first, first + period, first + 2*period, ...``.
 
     The internal state is a clock ``tau`` with ``tau' = 1``, reset to ``0`` at each
@@ -299,40 +359,16 @@ class PeriodicRule(TriggerRule):
 
     period: float
     first: float | None = None
+    kind: ClassVar[fm.RuleKind] = fm.PERIODIC
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "period", v.real("period", self.period, lower=0.0, lower_open=True))
-        first = self.period if self.first is None else self.first
-        object.__setattr__(self, "first", v.real("first", first, lower=0.0))
-
-    @property
-    def n_state(self) -> int:
-        return 1
-
-    def initial_state(self) -> np.ndarray:
-        assert self.first is not None  # set in __post_init__
-        return np.array([self.period - self.first])
-
-    def derivative(
-        self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
-    ) -> np.ndarray:
-        return np.ones_like(s)
-
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return fm.periodic_trigger(s[:, 0], self.period)
-
-    def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return np.zeros_like(s)
-
-    def engine_form(self) -> EngineForm:
-        return EngineForm(PERIODIC, {"period": self.period})
-
-    def sensor_spec(self) -> dict[str, Any]:
-        return {"kind": "periodic", "period": self.period, "first": self.first}
+        if self.first is None:
+            object.__setattr__(self, "first", self.period)
+        super().__post_init__()
 
 
 @dataclass(frozen=True)
-class RelativeRule(StatelessRule):
+class RelativeRule(KindRule):
     """Relative-threshold baseline: transmit when ``|e| >= rho |ytilde| + eps``.
 
     The threshold scales with the size of the measurement, a common rule in the
@@ -355,19 +391,4 @@ class RelativeRule(StatelessRule):
 
     rho: float
     eps: float
-    reads_y: ClassVar[bool] = True
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "rho", v.real("rho", self.rho, lower=0.0, lower_open=True))
-        object.__setattr__(self, "eps", v.real("eps", self.eps, lower=0.0, lower_open=True))
-
-    def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        if y is None:
-            raise InputError("RelativeRule.trigger needs the current measurement `y`; got None")
-        return fm.relative_trigger(_norm(e), _norm(y), self.rho, self.eps)
-
-    def engine_form(self) -> EngineForm:
-        return EngineForm(RELATIVE, {"rho": self.rho, "eps": self.eps})
-
-    def sensor_spec(self) -> dict[str, Any]:
-        return {"kind": "relative", "rho": self.rho, "eps": self.eps}
+    kind: ClassVar[fm.RuleKind] = fm.RELATIVE

@@ -15,8 +15,10 @@ exactly over one period:
     eta_{k+1} = exp(-a T) eta_k + c gamma(|e_k|) (1 - exp(-a T)) / a.
 
 Other ``alpha`` are integrated with 20 classical Runge--Kutta substeps per period (local
-error ``O((T/20)^5)``; :func:`etobs.formulas.eta_after_period`). The formulas are those
-the simulator runs (:mod:`etobs.formulas`, standard library only). Against the continuous
+error ``O((T/20)^5)``; :func:`etobs.formulas.eta_after_period`). Every kind of
+:data:`etobs.formulas.RULE_KINDS` runs so (the generalized rule's ``alpha_check`` as
+``alpha``); a clock counts samples. The formulas are those the simulator runs
+(:mod:`etobs.formulas`, standard library only). Against the continuous
 rule of the paper the sampled rule differs in two ways: it checks the trigger only at
 samples, so a transmission comes up to ``T`` late and the gap can exceed the threshold by
 up to ``E_i T`` (``E_i`` a bound on ``|d/dt y_i|``); and the filter sees ``gamma(|e|)``
@@ -33,41 +35,51 @@ from typing import Any
 
 from etobs import formulas as fm
 
-#: A K-function as a node runs it: its kind and two numbers (:func:`etobs.formulas.k_value`).
-KFn = tuple[int, float, float]
+#: A K-function as a node runs it: its kind and two numbers (:mod:`etobs.formulas`).
+KFn = tuple[fm.KKind, float, float]
 
 
 class RuleSpecError(ValueError):
     """A rule specification is not valid; the message names the key."""
 
 
-def _number(spec: Mapping[str, Any], key: str, *, lower: float = 0.0, strict: bool = False) -> float:
+def _number(spec: Mapping[str, Any], key: str, limits: fm.Number | None = None) -> float:
+    """``spec[key]``, a finite number within ``limits`` (``>= 0`` when none are given)."""
     if key not in spec:
         raise RuleSpecError(f"rule spec: missing key `{key}`")
     value = spec[key]
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise RuleSpecError(f"rule spec: `{key}` must be a finite number; got {value!r}")
-    if value < lower or (strict and value == lower):
-        raise RuleSpecError(f"rule spec: `{key}` must be {'>' if strict else '>='} {lower:g}; got {value!r}")
+    why = (limits or fm.Number(key, lower=0.0)).refusal(float(value))
+    if why:
+        raise RuleSpecError(f"rule spec: `{key}` {why}; got {value!r}")
     return float(value)
 
 
-def k_function(spec: Any, key: str) -> KFn:
-    """``["linear", a]`` (a s), ``["quadratic", ell]`` (ell s^2) or ``["power", k, p]`` (k s^p)."""
+def k_function(spec: Any, key: str, constant: bool = False) -> KFn:
+    """``["linear", a]`` (a s), ``["quadratic", ell]`` (ell s^2), ``["power", k, p]`` (k s^p).
+
+    A K-function kind of :data:`etobs.formulas.K_KINDS` and its numbers; a positive number
+    where the slot allows a constant (``constant``).
+    """
+    kinds = {name: k for name, k in fm.K_KINDS.items() if k is not fm.CONSTANT}
+    if constant and isinstance(spec, int | float) and not isinstance(spec, bool):
+        return fm.CONSTANT, _number({key: spec}, key, fm.CONSTANT.numbers[0]), 0.0
+    shown = " or ".join(
+        f"[{', '.join([repr(k.name), *(n.name for n in k.numbers)])}]" for k in kinds.values()
+    )
     if not isinstance(spec, Sequence) or isinstance(spec, str) or not spec:
-        raise RuleSpecError(f"rule spec: `{key}` must be a list like ['linear', 2.0]; got {spec!r}")
-    kind, *args = spec
-    shapes = {"linear": 1, "quadratic": 1, "power": 2}
-    if kind not in shapes or len(args) != shapes[kind]:
-        raise RuleSpecError(
-            f"rule spec: `{key}` must be ['linear', a], ['quadratic', ell] or ['power', k, p]"
-        )
-    vals = [_number({"v": a}, "v", strict=True) for a in args]
-    return fm.SENSOR_NAMES[kind], vals[0], vals[1] if len(vals) > 1 else 0.0
+        raise RuleSpecError(f"rule spec: `{key}` must be a list like {shown}; got {spec!r}")
+    name, *args = spec
+    kind = kinds.get(name) if isinstance(name, str) else None
+    if kind is None or len(args) != len(kind.numbers):
+        raise RuleSpecError(f"rule spec: `{key}` must be {shown}; got {spec!r}")
+    vals = [_number({n.name: a}, n.name, n) for n, a in zip(kind.numbers, args, strict=True)]
+    return kind, vals[0], vals[1] if len(vals) > 1 else 0.0
 
 
 def _k(fn: KFn, s: float) -> float:
-    return float(fm.k_value(fn[0], fn[1], fn[2], s))
+    return float(fn[0].value(fn[1], fn[2], s))
 
 
 def _norm(v: Sequence[float]) -> float:
@@ -80,8 +92,8 @@ class SampledRule:
     Parameters
     ----------
     spec : mapping
-        The rule as plain data (see the module docstring); kinds ``dynamic``,
-        ``static``, ``periodic``, ``relative``.
+        The rule as plain data (see the module docstring): a kind of
+        :data:`etobs.formulas.RULE_KINDS` by name, its K-functions, numbers and initial state.
     period : float
         Sampling period ``T > 0`` (seconds).
 
@@ -90,57 +102,71 @@ class SampledRule:
     def __init__(self, spec: Mapping[str, Any], period: float) -> None:
         if not isinstance(spec, Mapping):
             raise RuleSpecError(f"rule spec must be a mapping; got {type(spec).__name__}")
-        self.period = _number({"period": period}, "period", strict=True)
-        self.kind = spec.get("kind")
-        if self.kind == "dynamic":
-            self.gamma = k_function(spec.get("gamma"), "gamma")
-            self.alpha = k_function(spec.get("alpha"), "alpha")
-            self.sigma, self.c = _number(spec, "sigma"), _number(spec, "c")
-            self.b, self.eps = _number(spec, "b"), _number(spec, "eps", strict=True)
-            if self.b > 1:
-                raise RuleSpecError(f"rule spec: `b` must be <= 1; got {self.b!r}")
-            self.eta = _number(spec, "eta0")
-        elif self.kind == "static":
-            self.gamma = k_function(spec.get("gamma"), "gamma")
-            self.eps = _number(spec, "eps", strict=True)
-        elif self.kind == "relative":
-            self.rho, self.eps = _number(spec, "rho", strict=True), _number(spec, "eps", strict=True)
-        elif self.kind == "periodic":
-            every = _number(spec, "period", strict=True) / self.period
+        self.period = _number({"period": period}, "period", fm.Number("period", lower=0.0, lower_open=True))
+        name = spec.get("kind")
+        if not isinstance(name, str) or name not in fm.RULE_KINDS:
+            raise RuleSpecError(f"rule spec: `kind` must be one of {', '.join(fm.RULE_KINDS)}; got {name!r}")
+        self.kind = fm.RULE_KINDS[name]
+        self.k = {
+            slot.name: k_function(spec.get(slot.name), slot.name, slot.constant) for slot in self.kind.slots
+        }
+        self.numbers = {n.name: _number(spec, n.name, n) for n in self.kind.numbers}
+        self.eta = _number(spec, "eta0") if self.kind.state == "eta" else 0.0
+        if self.kind.state == "clock":
+            own = self.numbers[self.kind.period or ""]
+            every = own / self.period
             self.every = max(1, round(every))
             if abs(every - self.every) > 1e-9 * max(1.0, every):
                 raise RuleSpecError(
                     f"rule spec: a periodic rule's period must be a multiple of the sampling period "
-                    f"{self.period:g}; got {spec['period']!r}"
+                    f"{self.period:g}; got {spec[self.kind.period or '']!r}"
                 )
-            first = _number(spec, "first") if "first" in spec else float(spec["period"])
+            first = _number(spec, "first") if "first" in spec else own
             # fire at the sample of time `first`, then every `every` samples (as PeriodicRule)
             self.count = self.every - round(first / self.period) - 1
-        else:
-            raise RuleSpecError(
-                f"rule spec: `kind` must be dynamic, static, periodic or relative; got {self.kind!r}"
-            )
+
+    def _value(self, arg: str, e: float, y: float) -> float:
+        """The kind's argument ``arg`` (:mod:`etobs.formulas`) at this sample."""
+        if arg == "e":
+            return e
+        if arg == "y":
+            return y
+        if arg == "s":
+            return self.eta
+        split = fm.split_arg(arg)
+        if split is None:
+            return self.numbers[arg]
+        return _k(self.k[split[0]], self._value(split[1], e, y))
 
     def decide(self, e: Sequence[float], y: Sequence[float]) -> bool:
         """Whether to send at this sample, given the gap ``e = ybar - y`` and ``y``.
 
         Advances the rule's state over the period that follows.
         """
-        r = _norm(e)
-        if self.kind == "periodic":
+        if self.kind.state == "clock":  # a clock counts samples (exact multiples of T)
             self.count += 1
             fire = self.count >= self.every
             if fire:
                 self.count = 0
             return fire
-        if self.kind == "static":
-            return fm.static_trigger(_k(self.gamma, r), self.eps) >= 0.0
-        if self.kind == "relative":
-            return fm.relative_trigger(r, _norm(y), self.rho, self.eps) >= 0.0
-        fire = fm.dynamic_trigger(_k(self.gamma, r), _k(self.alpha, self.eta), self.sigma, self.eps) >= 0.0
+        r, ym = _norm(e), _norm(y)
+        fire = fm.evaluate(self.kind.trigger, lambda a: self._value(a, r, ym)) >= 0.0
+        if self.kind.state == "none":
+            return bool(fire)
+        assert self.kind.flow is not None and self.kind.reset is not None  # an eta state has both
         if fire:
-            self.eta = fm.eta_reset(self.eta, self.b)  # eq. (14), jump
+            self.eta = fm.evaluate(self.kind.reset, lambda a: self._value(a, r, ym))  # e.g. eq. (14), jump
             r = 0.0
-        # eq. (14) over the period, gamma(|e|) held
-        self.eta = fm.eta_after_period(self.eta, self.c * _k(self.gamma, r), *self.alpha, self.period)
-        return fire
+        flow, held = self.kind.flow, r  # e.g. eq. (14) over the period, |e| held
+
+        def f(s: float) -> float:
+            saved, self.eta = self.eta, s
+            try:
+                return float(fm.evaluate(flow, lambda a: self._value(a, held, ym)))
+            finally:
+                self.eta = saved
+
+        decay = self.k.get(self.kind.decay or "")
+        rate = decay[1] if decay is not None and decay[0] is fm.LINEAR else None
+        self.eta = fm.eta_after_period(self.eta, f, self.period, rate)
+        return bool(fire)
