@@ -53,6 +53,21 @@ def describe_failure(name: str, status: int, n_out: int | None = None) -> str:
     return text
 
 
+def with_params(fn: Any, params: Any, *args: Any) -> Any:
+    """``fn(*args, params)`` when ``params`` has entries, else ``fn(*args)``.
+
+    The calling convention of every user function (the parameter vector last, and only
+    when there is one); :func:`params_call` writes the same call as text for the
+    compiled forms.
+    """
+    return fn(*args, params) if params.size else fn(*args)
+
+
+def params_call(fn: str, args: list[str], params: str | None) -> str:
+    """The text of the call of ``fn`` on ``args``, with ``params`` last when there is one."""
+    return f"{fn}({', '.join([*args, *([params] if params else [])])})"
+
+
 @dataclass(frozen=True)
 class FunctionSpec:
     """How the engine calls one kind of user function.
@@ -82,11 +97,10 @@ class FunctionSpec:
         # the inputs are read-only: numba refuses a function that writes into them
         for i, n in enumerate(self.sizes):
             lines.append(f"    A{i} = readonly(carray(a{i}, ({n},)))")
-        call = self.call
         if self.n_params:
             lines.append(f"    P = readonly(carray(pp, ({self.n_params},)))")
-            call = f"{call}, P" if call else "P"
-        lines.append(f"    r = USER({call})")
+        args = [a for a in self.call.split(", ") if a]
+        lines.append(f"    r = {params_call('USER', args, 'P' if self.n_params else None)}")
         if self.n_out == 0:
             lines += ["    outp[0] = r", "    return 1"]
         else:

@@ -5,8 +5,12 @@
 kinds of its rule, K-functions and signals, the hold (Remark 3), the network's links,
 and the user's functions, which the generated code calls directly (numba compiles them
 into it, so a call costs what an inlined one does). It is the model of
-:mod:`etobs.estimation.assembly` (state layout, jump rules, order) for one run; the
-network's packets go through the same scalar functions (:mod:`etobs.estimation._network_jumps`). The problem's
+:mod:`etobs.estimation.assembly` (jump rules, order; the observer's flow as
+:func:`~etobs.estimation.assembly.observer_flow` computes it) on the state layout of
+:mod:`etobs.estimation.layout`, for one run; each rule's flow, trigger and reset are its
+kind's formulas (:mod:`etobs.formulas`), called with the arguments the kind declares; the
+network's packets go through the same scalar functions
+(:mod:`etobs.estimation._network_jumps`). The problem's
 *numbers* (the plant's and observer's ``params``, signal amplitudes, rule parameters) are
 read from the run's parameter vector ``p`` at fixed offsets, so problems that differ only
 in numbers share the compiled model.
@@ -25,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from etobs import formulas as fm
-from etobs.compile.functions import FunctionSpec
+from etobs.compile.functions import FunctionSpec, params_call
 from etobs.estimation import _network_jumps
 from etobs.estimation.calls import model_specs
 from etobs.model.fates import LINK_WIDTH
@@ -567,8 +571,9 @@ def _call(fn: str, args: str, params: str | None, out: str, n: int, slot: int) -
     that writes into them, which would change the state or the signals behind the
     solver's back.
     """
-    given = [*args.split(", "), *([params] if params else [])]
-    call = f"{fn}({', '.join(a if a == 't' else f'readonly({a})' for a in given)})"
+    call = params_call(
+        fn, [a if a == "t" else f"readonly({a})" for a in args.split(", ")], params and f"readonly({params})"
+    )
     return [
         f"st = store({call}, {out}, {n})",
         "if st != 1:",

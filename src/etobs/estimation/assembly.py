@@ -27,6 +27,32 @@ if TYPE_CHECKING:
     from etobs.estimation.problem import EstimationProblem
 
 
+def observer_flow(
+    pb: EstimationProblem,
+    calls: ModelCalls,
+    t: np.ndarray,
+    z: np.ndarray,
+    ubar: np.ndarray,
+    ybar: np.ndarray,
+    yhat: np.ndarray | None = None,
+) -> np.ndarray:
+    """The observer's flow ``z' = f_o(t, z, ubar, ybar, yhat)``, ``yhat = h(psi(z))`` (eq. (7)), for a batch.
+
+    ``ubar`` is the input the observer runs on (the held one with input nodes, eq. (50));
+    ``ybar`` the values held as sent: under the observer copy (Remark 3) the nodes send
+    ``ytilde - yhat``, and the observer holds ``yhat + ybar``. ``yhat`` may be given when
+    the caller has it. The one implementation of the observer's flow: the simulator's
+    reference (:func:`build_system`) and the observer service
+    (:mod:`etobs.runtime.service`) call it; the engine's model is generated from the
+    same steps (:mod:`etobs.estimation._model_source`).
+    """
+    if yhat is None:
+        yhat = calls.h(calls.psi(z))
+    if pb.hold == "innovation":
+        ybar = yhat + ybar
+    return calls.f_o(t, z, ubar, ybar, yhat)
+
+
 def build_system(pb: EstimationProblem, calls: ModelCalls) -> BatchedSystem:
     """The problem as a :class:`~etobs.hybrid.BatchedSystem` (eq. (16)--(22))."""
     return _Assembly(pb, calls).system()
@@ -88,10 +114,7 @@ class _Assembly:
             ubar = u.copy()
             for ch in self.u_held:
                 ubar[:, ch.index] = q[:, ch.held]
-        ybar = q[:, lay.ybar]
-        if self.innovation:  # Remark 3: the observer holds ytilde - yhat as sent
-            ybar = yhat + ybar
-        out[:, lay.z] = self.calls.f_o(t, z, ubar, ybar, yhat)  # eq. (7)
+        out[:, lay.z] = observer_flow(pb, self.calls, t, z, ubar, q[:, lay.ybar], yhat)  # eq. (7)
         for ch in self.channels:
             if ch.rule_state.stop > ch.rule_state.start:
                 sig, meas = self._source(ch, yt, u, yhat)

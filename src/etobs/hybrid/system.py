@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.compile.functions import with_params
 from etobs.errors import InputError, ModelError
 from etobs.hybrid.checks import check_log_columns, check_sizes
 
@@ -104,7 +105,7 @@ class HybridSystem:
     n_flow: int | None = None
     params: Any = None
     log_columns: tuple[int, ...] = ()
-    _compiled: dict[str, Any] = field(init=False, repr=False, compare=False, default_factory=dict)
+    _compiled: dict[str, CompiledSystem] = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         check_sizes(self.n, self.n_rules, self.n_flow)
@@ -123,15 +124,15 @@ class HybridSystem:
 
     def call_flow(self, t: float, x: np.ndarray) -> Any:
         """``flow`` of one run, with ``params`` when there are any."""
-        return self.flow(t, x, self.params) if self.params.size else self.flow(t, x)
+        return with_params(self.flow, self.params, t, x)
 
     def call_guard(self, t: float, x: np.ndarray) -> Any:
         """``guard`` of one run, with ``params`` when there are any."""
-        return self.guard(t, x, self.params) if self.params.size else self.guard(t, x)
+        return with_params(self.guard, self.params, t, x)
 
     def call_jump(self, k: int, t: float, x: np.ndarray) -> Any:
         """``jump`` of one run, with ``params`` when there are any."""
-        return self.jump(k, t, x, self.params) if self.params.size else self.jump(k, t, x)
+        return with_params(self.jump, self.params, k, t, x)
 
     def compiled(self) -> CompiledSystem:
         """The system for the engine (its functions compiled; memoized)."""

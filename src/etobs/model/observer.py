@@ -7,8 +7,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from etobs import _validate as v
+from etobs.compile.functions import with_params
 
 ObserverFn = Callable[..., np.ndarray]
 
@@ -60,17 +62,13 @@ class Observer:
         self, t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray
     ) -> np.ndarray:
         """``f_o`` of one run, with ``params`` when there are any."""
-        if self.params.size:
-            return self.f_o(t, z, u, ybar, yhat, self.params)
-        return self.f_o(t, z, u, ybar, yhat)
+        return with_params(self.f_o, self.params, t, z, u, ybar, yhat)  # type: ignore[no-any-return]
 
     def call_psi(self, z: np.ndarray, n_x: int) -> np.ndarray:
         """``xhat = psi(z)`` of one run (the first ``n_x`` entries of ``z`` without ``psi``)."""
         if self.psi is None:
             return z[:n_x]
-        if self.params.size:
-            return self.psi(z, self.params)
-        return self.psi(z)
+        return with_params(self.psi, self.params, z)  # type: ignore[no-any-return]
 
 
 def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger") -> Observer:
@@ -97,8 +95,13 @@ def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger"
     n_x, n_y = gain.shape
 
     def f_o(
-        t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray, p: np.ndarray
-    ) -> np.ndarray:
+        t: float,
+        z: NDArray[np.float64],
+        u: NDArray[np.float64],
+        ybar: NDArray[np.float64],
+        yhat: NDArray[np.float64],
+        p: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
         # L is in `params`, not in the closure: another gain compiles nothing, and a large one
         # (1000 x 1000) is not frozen into the machine code, which numba then cannot cache
         dx = f(t, z, u)  # a 1-D array, a list or a tuple (as the README allows): added entry by entry

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
+from etobs.compile.functions import with_params
 from etobs.errors import InputTypeError
 
 PlantFn = Callable[..., np.ndarray]
@@ -74,12 +75,8 @@ class Plant:
 
     def call_f_p(self, t: float, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``f_p`` of one run, with ``params`` when there are any."""
-        if self.params.size:
-            return self.f_p(t, x, u, v, self.params)
-        return self.f_p(t, x, u, v)
+        return with_params(self.f_p, self.params, t, x, u, v)  # type: ignore[no-any-return]
 
     def call_h(self, x: np.ndarray) -> np.ndarray:
         """``h`` of one run, with ``params`` when there are any."""
-        if self.params.size:
-            return self.h(x, self.params)
-        return self.h(x)
+        return with_params(self.h, self.params, x)  # type: ignore[no-any-return]

@@ -77,7 +77,10 @@ from typing import Any
 import numpy as np
 
 from etobs.errors import InputError
+from etobs.estimation.assembly import observer_flow
+from etobs.estimation.calls import ModelCalls
 from etobs.estimation.problem import EstimationProblem
+from etobs.formulas import rk4_step
 from etobs.runtime.marks import HighWaterMarks
 from etobs.runtime.packet import Packet, PacketError, decode, encode, key_id, resync_record
 
@@ -193,6 +196,7 @@ class ObserverCore:
         if missing:
             raise InputError(f"`keys` has no key for nodes {missing}")
         self.problem, self.keys, self.dt = problem, dict(keys), float(dt)
+        self._calls = ModelCalls(problem, compiled=False)
         n_z = problem.observer.n_z
         self.z = np.zeros(n_z) if z0 is None else np.asarray(z0, dtype=float).reshape(n_z)
         self.t = float(t0)
@@ -307,11 +311,9 @@ class ObserverCore:
             return np.asarray(self.problem.observer.call_psi(self.z, self.problem.plant.n_x), dtype=float)
 
     def _f(self, t: float, z: np.ndarray) -> np.ndarray:
-        """``f_o(t, z, u(t), ybar, h(psi(z)))`` of the one run the service observes."""
-        pb = self.problem
-        u = pb.u(np.array([t]))[0]
-        yhat = np.asarray(pb.plant.call_h(pb.observer.call_psi(z, pb.plant.n_x)), dtype=float)
-        return np.asarray(pb.observer.call_f_o(t, z, u, self.ybar.copy(), yhat), dtype=float)
+        """The observer's flow (eq. (7)) of the one run the service observes: the simulator's."""
+        pb, at = self.problem, np.array([t])
+        return observer_flow(pb, self._calls, at, z[None, :], pb.u(at), self.ybar[None, :])[0]
 
     def advance(self, t: float) -> None:
         """Integrate the observer to time ``t``, applying the queued packets on the way.
@@ -347,12 +349,7 @@ class ObserverCore:
         z = self.z
         with np.errstate(all="ignore"):  # an overflow is a status below, not a warning
             for k in range(n):
-                s = self.t + k * h
-                k1 = self._f(s, z)
-                k2 = self._f(s + h / 2, z + h / 2 * k1)
-                k3 = self._f(s + h / 2, z + h / 2 * k2)
-                k4 = self._f(s + h, z + h * k3)
-                step = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                step = rk4_step(self._f, self.t + k * h, z, h)
                 if not np.all(np.isfinite(step)) or not np.all(np.isfinite(self._psi(step))):
                     self.nonfinite = True  # keep the last finite state; say so
                     self.z, self.t = z, t
