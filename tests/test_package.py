@@ -7,6 +7,26 @@ def test_public_api_is_exported():
     assert etobs.__version__ == "0.1.0"
 
 
+def test_each_public_name_is_written_once_in_the_stub_and_is_the_object_of_its_module():
+    import ast
+    import importlib
+    from pathlib import Path
+
+    import pytest
+
+    stub = Path(etobs.__file__).with_suffix(".pyi")
+    imports = [n for n in ast.parse(stub.read_text()).body if isinstance(n, ast.ImportFrom)]
+    names = [(n.module, a.name, a.asname) for n in imports for a in n.names]
+    assert all(asname == name for _, name, asname in names), "the stub re-exports as `X as X`"
+    assert sorted(name for _, name, _ in names) == etobs.__all__  # one list, no second copy
+    assert len(set(etobs.__all__)) == len(etobs.__all__)
+    for module, name, _ in names:
+        assert getattr(etobs, name) is getattr(importlib.import_module(module), name), name
+    assert set(etobs.__all__) <= set(dir(etobs))
+    with pytest.raises(AttributeError, match=r"module 'etobs' has no attribute 'simulat'"):
+        etobs.simulat  # noqa: B018
+
+
 #: The paper's authors, in order: ../shared/paper/decentralized-event-triggered-estimation.tex,
 #: its \author lines (Petri, Postoyan, Astolfi, Nešić, Heemels).
 PAPER_AUTHORS = ["Petri", "Postoyan", "Astolfi", "Nešić", "Heemels"]

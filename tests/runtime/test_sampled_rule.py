@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from etobs import simulate
 from etobs.examples import robot_arm
+from etobs.formulas import RULE_KINDS
 from etobs.model import Linear, Power, Quadratic
 from etobs.runtime.sampled_rule import RuleSpecError, SampledRule
 
@@ -75,7 +76,7 @@ def test_periodic_static_relative():
     [
         (
             {"kind": "magic"},
-            r"`kind` must be one of dynamic, static, periodic, relative, generalized; got 'magic'",
+            rf"`kind` must be one of {', '.join(RULE_KINDS)}; got 'magic'",
         ),
         (DYN | {"gamma": ["cubic", 1.0]}, r"`gamma` must be \['linear', a\]"),
         (DYN | {"sigma": -1.0}, r"`sigma` must be >= 0; got -1.0"),
@@ -118,8 +119,7 @@ def test_sensor_spec_refuses_what_a_node_cannot_run():
     assert robot_arm().nodes[0].rule.sensor_spec()["gamma"] == ["quadratic", 5.0]
     with pytest.raises(
         InputError,
-        match=r"a sensor node runs the rules of etobs' kinds \(dynamic, static, periodic, relative, "
-        r"generalized\); got Own, a rule of your own",
+        match=rf"a sensor node runs the rules of etobs' kinds \({', '.join(RULE_KINDS)}\); got Own, a rule of your own",
     ):
         Own().sensor_spec()
     with pytest.raises(InputError, match=r"`gamma` is Custom"):

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from etobs import _validate as v
 from etobs import formulas as fm
@@ -50,11 +51,12 @@ class EngineForm:
     kfunctions: dict[str, KFunction | float]
 
 
-def _norm(e: np.ndarray) -> np.ndarray:
+def _norm(e: NDArray[np.float64]) -> NDArray[np.float64]:
     """Euclidean norm of each row: ``|e_i|``."""
     if e.shape[1] == 1:
         return np.abs(e[:, 0])
-    return np.sqrt(np.einsum("ij,ij->i", e, e))
+    squares: NDArray[np.float64] = np.einsum("ij,ij->i", e, e)
+    return np.sqrt(squares)
 
 
 class TriggerRule(ABC):
@@ -154,11 +156,12 @@ class KindRule(TriggerRule):
         return 0 if self.kind.state == "none" else 1
 
     def initial_state(self) -> np.ndarray:
-        if self.kind.state == "eta":
-            return np.array([self.eta0])
+        name = self.kind.initial  # the field of the subclass that sets it: eta0, first
+        if name is None:
+            return np.empty(0)
         if self.kind.state == "clock":
-            return np.array([getattr(self, self.kind.period or "") - self.first])
-        return np.empty(0)
+            return np.array([getattr(self, self.kind.period or "") - getattr(self, name)])
+        return np.array([getattr(self, name)])
 
     def _values(self, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None) -> Any:
         """The kind's arguments for a batch: ``|e|``, ``|y|``, the state, K-values, numbers."""
@@ -233,8 +236,7 @@ def rule_classes() -> dict[str, type[KindRule]]:
         When a kind has no class or two (a kind must be declared with its class).
 
     """
-    import etobs.model  # noqa: F401 - every class of etobs defined (the generalized rule's module too)
-
+    # importing this module ran etobs/model/__init__.py, which defines every class of etobs
     out: dict[str, type[KindRule]] = {}
     todo = list(KindRule.__subclasses__())
     while todo:
