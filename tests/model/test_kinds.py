@@ -42,13 +42,20 @@ def k_function(j: int):
     """The ``j``-th K-function of the samples: each K-function kind of etobs in turn."""
     classes = list(k_classes().values())
     cls = classes[j % len(classes)]
-    return cls(*[1.5 + sample(n) for n in cls.kind.numbers])
+    return cls(*[1.5 + sample(n) + 0.25 * i for i, n in enumerate(cls.kind.numbers)])
 
 
-def rule_of(name: str) -> KindRule:
-    """A rule of kind ``name`` built from its descriptor alone."""
+def rule_of(name: str, shift: int = 0) -> KindRule:
+    """A rule of kind ``name`` built from its descriptor alone.
+
+    Slot ``j`` holds the K-function kind ``j + shift`` (so that the shifts put every
+    K-function kind in every slot); with an odd ``shift`` a slot that allows a number has one.
+    """
     kind = fm.RULE_KINDS[name]
-    args = {slot.name: k_function(j) for j, slot in enumerate(kind.slots)}
+    args: dict[str, object] = {
+        slot.name: 0.7 if slot.constant and shift % 2 else k_function(j + shift)
+        for j, slot in enumerate(kind.slots)
+    }
     args |= {n.name: sample(n) for n in kind.numbers}
     if kind.initial is not None:
         args[kind.initial] = 0.5
@@ -145,10 +152,14 @@ def test_an_unknown_kind_is_an_error_never_a_fallback(call, message):
 # ---- every backend: the formulas hold at every transmission ---------------------------
 
 
+#: Every rule kind, with each K-function kind in each of its slots (the shifts of :func:`rule_of`).
+SHIFTED = [(n, k) for n in KINDS for k in range(len(k_classes()) if fm.RULE_KINDS[n].slots else 1)]
+
+
 @pytest.mark.parametrize("backend", ["engine", "scipy"])
-@pytest.mark.parametrize("name", KINDS)
-def test_every_kind_sends_where_its_formula_says_on_every_backend(name, backend):
-    kind, rule = fm.RULE_KINDS[name], rule_of(name)
+@pytest.mark.parametrize(("name", "shift"), SHIFTED)
+def test_every_kind_sends_where_its_formula_says_on_every_backend(name, shift, backend):
+    kind, rule = fm.RULE_KINDS[name], rule_of(name, shift)
     pb = ramp(rule)
     res = simulate(pb, [[X0]], T_END, z0=[0.0], backend=backend, save=SaveAt(steps=True))
     arc, ch = res.solution.arcs[0], pb.layout.channels[0]
@@ -173,9 +184,9 @@ def test_every_kind_sends_where_its_formula_says_on_every_backend(name, backend)
         assert by_formula(kind, "trigger", rule, e, y, s) < 1e-7
 
 
-@pytest.mark.parametrize("name", KINDS)
-def test_the_engine_and_the_reference_send_the_same_for_every_kind(name):
-    pb = ramp(rule_of(name))
+@pytest.mark.parametrize(("name", "shift"), SHIFTED)
+def test_the_engine_and_the_reference_send_the_same_for_every_kind(name, shift):
+    pb = ramp(rule_of(name, shift))
     a = simulate(pb, [[X0]], T_END, z0=[0.0], backend="engine")
     b = simulate(pb, [[X0]], T_END, z0=[0.0], backend="scipy")
     np.testing.assert_allclose(a.transmission_times(0, 0), b.transmission_times(0, 0), atol=1e-7)
@@ -184,9 +195,9 @@ def test_the_engine_and_the_reference_send_the_same_for_every_kind(name):
 # ---- the sensor node: the same formulas, sampled ------------------------------------
 
 
-@pytest.mark.parametrize("name", KINDS)
-def test_every_kind_runs_in_the_sensor_node_as_the_model_says(name):
-    kind, rule = fm.RULE_KINDS[name], rule_of(name)
+@pytest.mark.parametrize(("name", "shift"), SHIFTED)
+def test_every_kind_runs_in_the_sensor_node_as_the_model_says(name, shift):
+    kind, rule = fm.RULE_KINDS[name], rule_of(name, shift)
     T = 0.01
     node = SampledRule(rule.sensor_spec(), T)
     rng = np.random.default_rng(7)
@@ -217,9 +228,9 @@ def test_every_kind_runs_in_the_sensor_node_as_the_model_says(name):
     assert fired > 0
 
 
-@pytest.mark.parametrize("name", KINDS)
-def test_every_kind_round_trips_through_the_sensor_spec(name):
-    rule = rule_of(name)
+@pytest.mark.parametrize(("name", "shift"), SHIFTED)
+def test_every_kind_round_trips_through_the_sensor_spec(name, shift):
+    rule = rule_of(name, shift)
     spec = rule.sensor_spec()
     assert spec["kind"] == name
     node = SampledRule(spec, 0.01)
