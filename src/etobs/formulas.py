@@ -33,9 +33,26 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Protocol, TypedDict, TypeVar
 
 from etobs.errors import InputError
+
+if TYPE_CHECKING:  # for the annotations only: the sensor node runs without numpy
+    import numpy as np
+    from numpy.typing import NDArray
+
+#: What the formulas compute on, elementwise: floats (the sensor node, the engine's
+#: compiled model) or float arrays (the rule objects, on a batch of runs).
+R = TypeVar("R", float, "NDArray[np.float64]")
+
+
+class Limits(TypedDict):
+    """A number's limits, as the keyword arguments of :func:`etobs._validate.real`."""
+
+    lower: float | None
+    upper: float | None
+    lower_open: bool
+    upper_open: bool
 
 
 @dataclass(frozen=True)
@@ -48,7 +65,7 @@ class Number:
     lower_open: bool = False
     upper_open: bool = False
 
-    def limits(self) -> dict[str, Any]:
+    def limits(self) -> Limits:
         """The limits as keyword arguments of :func:`etobs._validate.real`."""
         return {
             "lower": self.lower,
@@ -67,45 +84,56 @@ class Number:
         return ""
 
 
-_POSITIVE = {"lower": 0.0, "lower_open": True}
+def _positive(name: str) -> Number:
+    """A number that must be > 0."""
+    return Number(name, lower=0.0, lower_open=True)
 
 
 # ---- K-functions ---------------------------------------------------------------------
 
 
-def linear(k1: Any, k2: Any, s: Any) -> Any:
+def linear(k1: float, k2: float, s: R) -> R:
     """``k1 s``."""
     return k1 * s
 
 
-def linear_inverse(k1: Any, k2: Any, r: Any) -> Any:
+def linear_inverse(k1: float, k2: float, r: R) -> R:
     """``r / k1``."""
     return r / k1
 
 
-def quadratic(k1: Any, k2: Any, s: Any) -> Any:
+def quadratic(k1: float, k2: float, s: R) -> R:
     """``k1 s^2`` (the paper's ``𝔩_i s^2``)."""
     return k1 * (s * s)
 
 
-def quadratic_inverse(k1: Any, k2: Any, r: Any) -> Any:
+def quadratic_inverse(k1: float, k2: float, r: R) -> R:
     """``sqrt(r / k1)``."""
-    return (r / k1) ** 0.5
+    out: R = (r / k1) ** 0.5  # a float (typeshed: Any, for a complex power of a negative float)
+    return out
 
 
-def power(k1: Any, k2: Any, s: Any) -> Any:
+def power(k1: float, k2: float, s: R) -> R:
     """``k1 s^k2``."""
-    return k1 * s**k2
+    out: R = k1 * s**k2  # s >= 0: a float (typeshed: Any, for a complex power of a negative float)
+    return out
 
 
-def power_inverse(k1: Any, k2: Any, r: Any) -> Any:
+def power_inverse(k1: float, k2: float, r: R) -> R:
     """``(r / k1)^(1 / k2)``."""
-    return (r / k1) ** (1.0 / k2)
+    out: R = (r / k1) ** (1.0 / k2)  # r >= 0: as in quadratic_inverse
+    return out
 
 
-def constant(k1: Any, k2: Any, s: Any) -> Any:
+def constant(k1: float, k2: float, s: R) -> R:
     """The constant ``k1`` (same shape as ``s``): a weight ``d'`` given as a number."""
     return k1 + 0.0 * s
+
+
+class KFormula(Protocol):
+    """A K-function formula or its inverse: ``(k1, k2, s) -> r``, on a float or elementwise."""
+
+    def __call__(self, k1: float, k2: float, s: R, /) -> R: ...
 
 
 @dataclass(frozen=True)
@@ -127,18 +155,16 @@ class KKind:
 
     name: str
     numbers: tuple[Number, ...]
-    value: Callable[[Any, Any, Any], Any]
-    inverse: Callable[[Any, Any, Any], Any] | None
+    value: KFormula
+    inverse: KFormula | None
     text: str
 
 
-LINEAR = KKind("linear", (Number("a", **_POSITIVE),), linear, linear_inverse, "{a:g}*s")
-QUADRATIC = KKind("quadratic", (Number("ell", **_POSITIVE),), quadratic, quadratic_inverse, "{ell:g}*s^2")
-POWER = KKind(
-    "power", (Number("k", **_POSITIVE), Number("p", **_POSITIVE)), power, power_inverse, "{k:g}*s^{p:g}"
-)
+LINEAR = KKind("linear", (_positive("a"),), linear, linear_inverse, "{a:g}*s")
+QUADRATIC = KKind("quadratic", (_positive("ell"),), quadratic, quadratic_inverse, "{ell:g}*s^2")
+POWER = KKind("power", (_positive("k"), _positive("p")), power, power_inverse, "{k:g}*s^{p:g}")
 #: Not a class-K function: the constant weight ``d'`` of the generalized rule given as a number.
-CONSTANT = KKind("constant", (Number("value", **_POSITIVE),), constant, None, "{value:g}")
+CONSTANT = KKind("constant", (_positive("value"),), constant, None, "{value:g}")
 
 #: The K-function kinds by name: what a spec may write and the engine compiles.
 K_KINDS: dict[str, KKind] = {k.name: k for k in (LINEAR, QUADRATIC, POWER, CONSTANT)}
@@ -159,7 +185,7 @@ def k_kind(name: object) -> KKind:
     return kind
 
 
-def k_value(kind: str, k1: Any, k2: Any, s: Any) -> Any:
+def k_value(kind: str, k1: float, k2: float, s: R) -> R:
     """The K-function of kind ``kind`` (a name) with numbers ``k1, k2`` at ``s`` (a float or an array)."""
     return k_kind(kind).value(k1, k2, s)
 
@@ -167,27 +193,27 @@ def k_value(kind: str, k1: Any, k2: Any, s: Any) -> Any:
 # ---- rules ---------------------------------------------------------------------------
 
 
-def dynamic_flow(gamma_e: Any, alpha_eta: Any, c: float) -> Any:
+def dynamic_flow(gamma_e: R, alpha_eta: R, c: float) -> R:
     """``eta' = -alpha(eta) + c gamma(|e|)`` (eq. (14))."""
     return -alpha_eta + c * gamma_e
 
 
-def dynamic_trigger(gamma_e: Any, alpha_eta: Any, sigma: float, eps: float) -> Any:
+def dynamic_trigger(gamma_e: R, alpha_eta: R, sigma: float, eps: float) -> R:
     """``gamma(|e|) - sigma alpha(eta) - eps``: the node sends when it is ``>= 0`` (eq. (15))."""
     return gamma_e - sigma * alpha_eta - eps
 
 
-def eta_reset(eta: Any, b: float) -> Any:
+def eta_reset(eta: R, b: float) -> R:
     """``eta+ = b eta`` at the node's own transmission (eq. (14))."""
     return b * eta
 
 
-def static_trigger(gamma_e: Any, eps: float) -> Any:
+def static_trigger(gamma_e: R, eps: float) -> R:
     """``gamma(|e|) - eps`` (eq. (15) with ``sigma = 0``)."""
     return gamma_e - eps
 
 
-def relative_trigger(e: Any, y: Any, rho: float, eps: float) -> Any:
+def relative_trigger(e: R, y: R, rho: float, eps: float) -> R:
     """``|e| - rho |y| - eps``: the relative-threshold rule."""
     return e - rho * y - eps
 
@@ -202,19 +228,19 @@ def clock_reset() -> float:
     return 0.0
 
 
-def periodic_trigger(tau: Any, period: float) -> Any:
+def periodic_trigger(tau: R, period: float) -> R:
     """``tau - period``: the clock ``tau`` (``tau' = 1``, reset to 0) reaches the period."""
     return tau - period
 
 
-def generalized_flow(gamma_check_e: Any, alpha_check_eta: Any) -> Any:
+def generalized_flow(gamma_check_e: R, alpha_check_eta: R) -> R:
     """``eta' = -alpha_check(eta) + gamma_check(|e|)`` (eq. (44))."""
     return -alpha_check_eta + gamma_check_e
 
 
 def generalized_trigger(
-    gamma_e: Any, weight: Any, gamma_check_e: Any, alpha_check_eta: Any, sigma: float, eps: float
-) -> Any:
+    gamma_e: R, weight: R, gamma_check_e: R, alpha_check_eta: R, sigma: float, eps: float
+) -> R:
     """``gamma(|e|) + d'(eta) gamma_check(|e|) - sigma d'(eta) alpha_check(eta) - eps`` (eq. (45)).
 
     The paper prints (45) with ``<=``; the node sends when this is ``>= 0``, the reading
@@ -227,7 +253,7 @@ def generalized_trigger(
 class Formula:
     """A formula of a rule and the names of its arguments, in order (module docstring)."""
 
-    fn: Callable[..., Any]
+    fn: Callable[..., float | NDArray[np.float64]]
     args: tuple[str, ...]
 
 
@@ -299,7 +325,7 @@ class RuleKind:
 _SIGMA = Number("sigma", lower=0.0)
 _C = Number("c", lower=0.0)
 _B = Number("b", lower=0.0, upper=1.0)
-_EPS = Number("eps", **_POSITIVE)
+_EPS = _positive("eps")
 
 DYNAMIC = RuleKind(  # eq. (14)-(15)
     "dynamic",
@@ -314,7 +340,7 @@ DYNAMIC = RuleKind(  # eq. (14)-(15)
 STATIC = RuleKind("static", (_EPS,), (Slot("gamma"),), "none", Formula(static_trigger, ("gamma(e)", "eps")))
 PERIODIC = RuleKind(
     "periodic",
-    (Number("period", **_POSITIVE),),
+    (_positive("period"),),
     (),
     "clock",
     trigger=Formula(periodic_trigger, ("s", "period")),
@@ -324,7 +350,7 @@ PERIODIC = RuleKind(
 )
 RELATIVE = RuleKind(
     "relative",
-    (Number("rho", **_POSITIVE), _EPS),
+    (_positive("rho"), _EPS),
     (),
     "none",
     Formula(relative_trigger, ("e", "y", "rho", "eps")),
@@ -369,7 +395,9 @@ def split_arg(arg: str) -> tuple[str, str] | None:
     return slot, at
 
 
-def evaluate(formula: Formula, value: Callable[[str], Any]) -> Any:
+def evaluate(
+    formula: Formula, value: Callable[[str], float | NDArray[np.float64]]
+) -> float | NDArray[np.float64]:
     """``formula`` applied to its arguments, each given by ``value(name)``."""
     return formula.fn(*(value(a) for a in formula.args))
 
@@ -377,7 +405,7 @@ def evaluate(formula: Formula, value: Callable[[str], Any]) -> Any:
 # ---- integration over a sampling period ----------------------------------------------
 
 
-def rk4_step(f: Callable[[float, Any], Any], t: float, y: Any, h: float) -> Any:
+def rk4_step(f: Callable[[float, R], R], t: float, y: R, h: float) -> R:
     """One classical Runge--Kutta step of ``y' = f(t, y)`` from ``(t, y)``: ``y(t + h)``.
 
     ``y`` is a float or an array; the one fixed-step integrator of etobs (the sensor's

@@ -73,13 +73,13 @@ class Builtin(KFunction):
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         k1, k2 = self._numbers()
-        return self.kind.value(k1, k2, np.asarray(s, dtype=float))  # type: ignore[no-any-return]
+        return self.kind.value(k1, k2, np.asarray(s, dtype=float))
 
     def inverse(self, r: np.ndarray) -> np.ndarray:
         if self.kind.inverse is None:
             raise InputError(f"{type(self).__name__} has no inverse")
         k1, k2 = self._numbers()
-        return self.kind.inverse(k1, k2, np.asarray(r, dtype=float))  # type: ignore[no-any-return]
+        return self.kind.inverse(k1, k2, np.asarray(r, dtype=float))
 
     def engine_form(self) -> tuple[KKind, float, float, None]:
         return (self.kind, *self._numbers(), None)
@@ -150,8 +150,8 @@ class Custom(KFunction):
 
     """
 
-    fn: Callable[[np.ndarray], np.ndarray]
-    inv: Callable[[np.ndarray], np.ndarray] | None = None
+    fn: Callable[[float], float]
+    inv: Callable[[float], float] | None = None
     name: str = field(default="custom")
 
     def __post_init__(self) -> None:
@@ -192,9 +192,11 @@ class Custom(KFunction):
             hi = 1.0
             while float(self.fn(hi)) < ri and hi < 1e300:
                 hi *= 2.0
-            return brentq(lambda s: float(self.fn(s)) - ri, 0.0, hi, xtol=1e-14)
+            root: float = brentq(lambda s: float(self.fn(s)) - ri, 0.0, hi, xtol=1e-14)
+            return root
 
-        return np.vectorize(one, otypes=[float])(np.asarray(r, dtype=float))
+        out: np.ndarray = np.vectorize(one, otypes=[float])(np.asarray(r, dtype=float))
+        return out
 
     def __str__(self) -> str:
         return self.name
