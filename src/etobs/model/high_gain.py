@@ -17,6 +17,7 @@ from math import comb
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from etobs import _validate as v
 from etobs.errors import InputError
@@ -34,7 +35,9 @@ def high_gain_gain(n_x: int, theta: float, k: Any = None) -> np.ndarray:
     """
     n = v.integer("n_x", n_x, lower=1)
     th = v.real("theta", theta, lower=0.0, lower_open=True)
-    kk = np.array([comb(n, i) for i in range(1, n + 1)], dtype=float) if k is None else v.vector("k", k, n)
+    kk: NDArray[np.float64] = (
+        np.array([comb(n, i) for i in range(1, n + 1)], dtype=float) if k is None else v.vector("k", k, n)
+    )
     # the companion matrix of k, [-k | I; 0], must be Hurwitz
     Ac = np.zeros((n, n))
     Ac[:, 0] = -kk

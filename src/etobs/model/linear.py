@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from etobs import _validate as v
 from etobs.errors import InputError
@@ -84,7 +85,7 @@ def linear_plant(
     f_p = affine_field(n_x, n_u, n_v)
     offset = a.size + b.size + e.size
 
-    def h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    def h(x: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
         # y = C x: C is the last block of p
         return p[offset : offset + n_y * n_x].reshape((n_y, n_x)) @ x
 
@@ -149,7 +150,13 @@ def affine_field(n_x: int, n_u: int, n_v: int) -> Callable[..., np.ndarray]:
     nb, ne = n_x * n_u, n_x * n_v
     na = n_x * n_x
 
-    def f(t: float, x: np.ndarray, u: np.ndarray, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+    def f(
+        t: float,
+        x: NDArray[np.float64],
+        u: NDArray[np.float64],
+        w: NDArray[np.float64],
+        p: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
         dx = p[0:na].reshape((n_x, n_x)) @ x
         if n_u:
             dx = dx + p[na : na + nb].reshape((n_x, n_u)) @ u

@@ -61,7 +61,7 @@ class Constant(Signal):
 
     @property
     def dim(self) -> int:  # type: ignore[override]
-        return self.value.shape[0]
+        return int(self.value.shape[0])
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.value, (t.shape[0], self.dim))
@@ -99,7 +99,7 @@ class Sinusoid(Signal):
 
     @property
     def dim(self) -> int:  # type: ignore[override]
-        return self.amplitude.shape[0]
+        return int(self.amplitude.shape[0])
 
     @property
     def bound(self) -> float:
@@ -107,7 +107,8 @@ class Sinusoid(Signal):
         return float(np.linalg.norm(np.abs(self.amplitude) + np.abs(self.offset)))
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
-        return np.sin(self.omega * t + self.phase)[:, None] * self.amplitude + self.offset
+        out: np.ndarray = np.sin(self.omega * t + self.phase)[:, None] * self.amplitude + self.offset
+        return out
 
     def engine_form(self) -> tuple[int, np.ndarray, None]:
         return SINUSOID, np.concatenate([self.amplitude, self.offset, [self.omega, self.phase]]), None
@@ -159,7 +160,7 @@ def as_signal(name: str, value: object, dim: int, size: str = "") -> Signal:
     if isinstance(value, Signal):
         sig = value
     elif callable(value):
-        sig = FunctionSignal(value, dim)  # type: ignore[arg-type]
+        sig = FunctionSignal(value, dim)
     else:
         sig = Constant(v.vector(name, value))
     if sig.dim != dim:
