@@ -208,7 +208,7 @@ def _install_load_guard() -> None:
     from numba.core import caching
 
     _cache.install_checksums()
-    load = caching.Cache.load_overload
+    load: Callable[..., Any] = caching.Cache.load_overload  # numba's method, untyped
     if getattr(load, "_etobs", False):
         return
 
@@ -226,7 +226,7 @@ def _install_load_guard() -> None:
             return None
 
     load_overload._etobs = True  # type: ignore[attr-defined]
-    caching.Cache.load_overload = load_overload
+    caching.Cache.load_overload = load_overload  # type: ignore[method-assign]  # the patch is the point
 
 
 def _warn_once(message: str) -> None:

@@ -34,16 +34,19 @@ jump unless the function reports its own code >= 16).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
 import numba
 import numpy as np
 from llvmlite import ir
 from numba.core import types
 from numba.core.extending import intrinsic
+from numba.np.numpy_support import carray
+from numpy.typing import NDArray
 
-from etobs.compile.ccall import address, ccall, load_i64, store_i64
+from etobs.compile import ccall as _ccall
 from etobs.hybrid import _jitcache
 from etobs.hybrid.options import MAX_FACTOR, MIN_FACTOR, SAFETY  # noqa: F401 - read by the template
 from etobs.hybrid.peaks import peak_probes as _peak_probes
@@ -76,9 +79,28 @@ GUARD_NAN = 16 * GUARD + 4  # etobs.compile.functions.NAN_RESULT
 #: one C function may serve as all three (the estimation model does: one compile).
 K_FLOW, K_GUARD = -1, -2
 
+if TYPE_CHECKING:
+    import ctypes
+
+#: What the system's functions read and write: a float64 array, or its address (an int).
+Pointer: TypeAlias = "NDArray[np.float64] | int"
+#: A run's addresses (:func:`run_args`): flow, guard, jump, ``ia``, ``cf``, scratch, failure flag.
+RunArgs: TypeAlias = tuple[int, int, int, int, int, int, int]
+
+# The intrinsics of etobs.compile.ccall, typed as compiled code calls them: numba's stubs
+# type the call of an intrinsic as a call of its typing function (the typing context
+# first) that never returns (true of a call from Python, which raises).
+ccall = cast(
+    "Callable[[int, int, float, Pointer, Pointer, Pointer, Pointer, Pointer, Pointer, Pointer], int]",
+    _ccall.ccall,
+)
+address = cast("Callable[[NDArray[Any]], int]", _ccall.address)
+load_i64 = cast("Callable[[int], int]", _ccall.load_i64)
+store_i64 = cast("Callable[[int, int], None]", _ccall.store_i64)
+
 
 @numba.njit(inline="always", error_model="numpy")
-def _system(slot, k, t, x, p, args, out):
+def _system(slot: int, k: int, t: float, x: Pointer, p: Pointer, args: RunArgs, out: Pointer) -> None:
     """Call the system's function ``slot`` (FLOW, GUARD, JUMP) by address into ``out``.
 
     ``args`` is the run's tuple of addresses (:func:`run_args`); ``x``, ``p`` and ``out``
@@ -92,7 +114,11 @@ def _system(slot, k, t, x, p, args, out):
 
 
 @numba.njit(inline="always", error_model="numpy")
-def run_args(shared, work, failure):
+def run_args(
+    shared: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]],
+    work: NDArray[np.float64],
+    failure: NDArray[np.int64],
+) -> RunArgs:
     """The run's addresses: flow, guard, jump, ``ia``, ``cf``, its scratch and its failure flag.
 
     Plain integers, so that passing them around costs no reference counting (a tuple
@@ -104,54 +130,57 @@ def run_args(shared, work, failure):
     return (a[0], a[1], a[2], address(shared[1]), address(shared[2]), address(work), address(failure))
 
 
-@intrinsic
-def _f8ptr(typingctx, addr):  # type: ignore[no-untyped-def]
+def _f8ptr_typing(typingctx: Any, addr: Any) -> tuple[Any, Callable[..., Any]]:
     """``addr`` (an integer) as a pointer to float64."""
-    sig = types.CPointer(types.float64)(addr)
+    sig = types.CPointer(types.float64)(addr)  # type: ignore[no-untyped-call]  # untyped in numba's stubs
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         return builder.inttoptr(args[0], ir.DoubleType().as_pointer())
 
     return sig, codegen
 
 
+#: ``_f8ptr(addr)``: the intrinsic, typed as compiled code calls it (see ``ccall`` above).
+_f8ptr = cast("Callable[[int], ctypes._Pointer[ctypes.c_double]]", intrinsic(_f8ptr_typing))
+
+
 @numba.njit(inline="always", error_model="numpy")
-def rows_at(base, offset, rows, cols):
+def rows_at(base: int, offset: int, rows: int, cols: int) -> NDArray[np.float64]:
     """A ``(rows, cols)`` array at ``base + 8 offset`` (an address into the thread's scratch).
 
     It owns no memory, so numba counts no references on it: the step loop's arrays are
     all of this kind (a counted array costs two atomic operations at every call that
     takes it).
     """
-    return numba.carray(_f8ptr(base + 8 * offset), (rows, cols))
+    return carray(_f8ptr(base + 8 * offset), (rows, cols))
 
 
 @numba.njit(inline="always", error_model="numpy")
-def vector_at(base, offset, size):
+def vector_at(base: int, offset: int, size: int) -> NDArray[np.float64]:
     """A 1-D array of ``size`` at ``base + 8 offset`` (see :func:`rows_at`)."""
-    return numba.carray(_f8ptr(base + 8 * offset), (size,))
+    return carray(_f8ptr(base + 8 * offset), (size,))
 
 
 @numba.njit(inline="always", error_model="numpy")
-def failed(args):
+def failed(args: RunArgs) -> bool:
     """Whether a call of this run failed (its code is then at ``args[6]``)."""
     return load_i64(args[6]) != 0
 
 
 @numba.njit(inline="always", error_model="numpy")
-def flow(t, x, p, args, dx):
+def flow(t: float, x: Pointer, p: Pointer, args: RunArgs, dx: Pointer) -> None:
     """``dx = x'`` by the system's flow function."""
     _system(FLOW, K_FLOW, t, x, p, args, dx)
 
 
 @numba.njit(inline="always", error_model="numpy")
-def guard(t, x, p, args, g):
+def guard(t: float, x: Pointer, p: Pointer, args: RunArgs, g: Pointer) -> None:
     """``g`` = every rule's event function."""
     _system(GUARD, K_GUARD, t, x, p, args, g)
 
 
 @numba.njit(inline="always", error_model="numpy")
-def jump(k, t, x, p, args):
+def jump(k: int, t: float, x: Pointer, p: Pointer, args: RunArgs) -> None:
     """Apply rule ``k``'s jump map to ``x`` in place."""
     _system(JUMP, k, t, x, p, args, x)
 
@@ -160,7 +189,14 @@ flow_call, guard_call, jump_call = flow, guard, jump
 
 
 @numba.njit(inline="always", error_model="numpy")
-def _dense_eval(Q, nq, dop853, x0, theta, out):
+def _dense_eval(
+    Q: NDArray[np.float64],
+    nq: int,
+    dop853: bool,
+    x0: NDArray[np.float64],
+    theta: float,
+    out: NDArray[np.float64],
+) -> None:
     """Continuous extension at ``theta`` in [0, 1] of the step from ``x0``, into ``out``.
 
     With the ``nq`` rows ``Q_k`` of :func:`_dense_coeffs` (in ``_kernel_body.py``),
@@ -185,7 +221,7 @@ def _dense_eval(Q, nq, dop853, x0, theta, out):
 
 
 @numba.njit(inline="always", error_model="numpy")
-def _any_nonneg(g):
+def _any_nonneg(g: NDArray[np.float64]) -> bool:
     for k in range(g.shape[0]):
         if g[k] >= 0.0:
             return True
@@ -193,7 +229,7 @@ def _any_nonneg(g):
 
 
 @numba.njit(inline="always", error_model="numpy")
-def _any_nan(g):
+def _any_nan(g: NDArray[np.float64]) -> bool:
     for k in range(g.shape[0]):
         if np.isnan(g[k]):
             return True
@@ -201,7 +237,7 @@ def _any_nan(g):
 
 
 @numba.njit(inline="always", error_model="numpy")
-def _all_finite(x):
+def _all_finite(x: NDArray[np.float64]) -> bool:
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
             return False
@@ -235,7 +271,7 @@ def tableau_constants(method: str) -> dict[str, object]:
         # rows: one per dense coefficient (Dormand--Prince 5(4) stores P transposed)
         "TDD": np.ascontiguousarray(tab.dense_d if dop853 else tab.dense_d.T),
         "N_STAGES": s,
-        "N_EXTRA": tab.dense_a.shape[0] if dop853 else 0,
+        "N_EXTRA": tab.dense_a.shape[0] if tab.dense_a is not None else 0,
         "NQ": 7 if dop853 else tab.dense_d.shape[1],
         "ERR_ORDER": tab.error_order,
         "DOP853": dop853,

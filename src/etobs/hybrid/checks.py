@@ -57,7 +57,7 @@ def span(t_span: Any) -> tuple[float, float]:
     return t0, t_end
 
 
-def check_progress(progress: Any) -> Callable[[int], object] | None:
+def check_progress(progress: object) -> Callable[[float], object] | None:
     """``progress`` validated: a callable ``progress(n_runs_finished)``, or ``None``."""
     if progress is not None and not callable(progress):
         raise InputTypeError(

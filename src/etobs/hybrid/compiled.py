@@ -19,7 +19,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import Any, SupportsInt
 
 import numpy as np
 
@@ -109,7 +109,7 @@ class CompiledSystem:
                 f"`rule_names` has {len(self.rule_names)} names; expected n_rules={self.n_rules}"
             )
 
-    def failure(self, code: int) -> str:
+    def failure(self, code: SupportsInt) -> str:
         """The failing function and how it failed, from a run's ``error_code``."""
         from etobs.compile.functions import describe_failure
 

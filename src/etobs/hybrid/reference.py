@@ -51,7 +51,7 @@ def _budgeted_dop853(budget: int) -> Any:
     """
     from scipy.integrate import DOP853
 
-    class Budgeted(DOP853):  # type: ignore[misc, valid-type]
+    class Budgeted(DOP853):  # type: ignore[misc]  # scipy has no type information: DOP853 is Any
         ran_out = False
 
         def _step_impl(self) -> tuple[bool, str | None]:
@@ -184,21 +184,23 @@ class _Run:
         # m event functions one by one at the same (t, y), and once more at the start
         # of a segment where jumps() has just evaluated the guard. The key is the
         # identity of x (held here, so it cannot be recycled) and the value of t.
-        self.last: tuple[Any, Any, Any] = (None, None, None)
+        self.last: tuple[float, np.ndarray, np.ndarray] | None = None
         # Guard values along the dense output of the current segment, by time:
         # locate() and brentq evaluate the bracket ends more than once.
         self.on_dense: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         flow, n = system.flow, system.n
 
-        def fun(t: float, x: np.ndarray) -> Any:
-            return _checked("flow", _call("flow", flow, np.array((t,)), x[None]), (1, n))[0]
+        def fun(t: float, x: np.ndarray) -> np.ndarray:
+            dx: np.ndarray = _checked("flow", _call("flow", flow, np.array((t,)), x[None]), (1, n))[0]
+            return dx
 
         self.fun = fun
         self.events = [self._event(k) for k in range(system.n_rules)] or None
 
     def _event(self, k: int) -> Any:
         def ev(t: float, x: np.ndarray) -> float:
-            return self.g1(t, x)[k]
+            value: float = self.g1(t, x)[k]
+            return value
 
         ev.terminal = True  # type: ignore[attr-defined]
         ev.direction = 1.0  # type: ignore[attr-defined]
@@ -206,13 +208,14 @@ class _Run:
 
     def g1(self, t: float, x: np.ndarray) -> np.ndarray:
         """Event functions at one point, x (n,) -> (m,)."""
-        last_t, last_x, last_g = self.last
-        if x is last_x and t == last_t:
-            return last_g
+        if self.last is not None:
+            last_t, last_x, last_g = self.last
+            if x is last_x and t == last_t:
+                return last_g
         # a copy: the values are remembered, whatever the guard does with its output
-        g = _event_values(_call("guard", self.sys.guard, np.array((t,)), x[None]), x[None], self.sys.n_rules)[
-            0
-        ]
+        g: np.ndarray = _event_values(
+            _call("guard", self.sys.guard, np.array((t,)), x[None]), x[None], self.sys.n_rules
+        )[0]
         self.last = (t, x, g)
         return g
 

@@ -5,13 +5,17 @@ from __future__ import annotations
 import html
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple, overload
+from typing import TYPE_CHECKING, Any, NamedTuple, overload
 
 import numpy as np
+from numpy.typing import NDArray
 
 from etobs._validate import shown
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.status import Status, status_message
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass(frozen=True, repr=False)
@@ -34,7 +38,7 @@ class HybridArc:
     x: np.ndarray
 
     def __len__(self) -> int:
-        return self.t.shape[0]
+        return int(self.t.shape[0])
 
     def __repr__(self) -> str:
         if not len(self):
@@ -126,7 +130,7 @@ class JumpLog:
         object.__setattr__(self, "names", names)
 
     def __len__(self) -> int:
-        return self.run.shape[0]
+        return int(self.run.shape[0])
 
     @overload
     def __getitem__(self, key: int | np.integer) -> JumpRow: ...
@@ -163,6 +167,7 @@ class JumpLog:
                 key = key.astype(np.int64)
                 if key.size and not (np.all(key < L) and np.all(key >= -L)):
                     raise IndexError(f"JumpLog rows {key.tolist()} are out of range: the log has {L} rows")
+        assert self.x is not None
         return replace(
             self, run=self.run[key], rule=self.rule[key], t=self.t[key], j=self.j[key], x=self.x[key]
         )
@@ -185,7 +190,7 @@ class JumpLog:
 
     def times(self, run: int, rule: int) -> np.ndarray:
         """Jump times of ``rule`` in ``run``, increasing."""
-        keep = (self.run == run) & (self.rule == rule)
+        keep: NDArray[np.bool_] = (self.run == run) & (self.rule == rule)
         return self.t[keep]
 
     def counts(self, n_runs: int, n_rules: int) -> np.ndarray:
@@ -204,7 +209,7 @@ class JumpLog:
         names = self._column_names(names)
         return {**{k: getattr(self, k) for k in _KEYS}, **{n: self.x[:, c] for c, n in enumerate(names)}}
 
-    def to_pandas(self, names: Sequence[str] | None = None) -> Any:
+    def to_pandas(self, names: Sequence[str] | None = None) -> pd.DataFrame:
         """The log as a :class:`pandas.DataFrame`, one row per jump.
 
         Columns ``run, rule, t, j`` and one per logged state entry, named ``names``
@@ -376,7 +381,7 @@ class HybridSolution:
     @property
     def n_runs(self) -> int:
         """Number of runs ``B``."""
-        return self.status.shape[0]
+        return int(self.status.shape[0])
 
     @property
     def ok(self) -> bool:

@@ -51,7 +51,7 @@ def solve(
     options: SolverOptions | None = None,
     save: SaveAt | None = None,
     backend: str = "auto",
-    progress: Callable[[int], object] | None = None,
+    progress: Callable[[float], object] | None = None,
 ) -> HybridSolution:
     """Solve a batch of runs of a hybrid system (the front door of :mod:`etobs.hybrid`).
 

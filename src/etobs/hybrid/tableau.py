@@ -65,7 +65,7 @@ class Tableau:
     @property
     def stages(self) -> int:
         """Number of stages of one step (the FSAL stage excluded)."""
-        return self.b.shape[0]
+        return int(self.b.shape[0])
 
 
 def _dopri5() -> Tableau:
