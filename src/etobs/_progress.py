@@ -11,7 +11,10 @@ single long run shows how far it got and how long the rest would take.
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 #: Seconds before a bar first appears: work shorter than this shows nothing.
 DELAY = 1.0
@@ -35,7 +38,7 @@ def progress_write(line: str) -> None:
 
 def progress_bar(
     total: int, desc: str, *, enabled: bool | None = None, unit: str = "run", initial: int = 0
-) -> Any:
+) -> tqdm[NoReturn]:
     """A tqdm bar on stderr counting ``total`` units of work.
 
     Parameters
@@ -91,7 +94,7 @@ _YEAR = 365.25 * 86400.0
 class _HorizonBar:
     """A tqdm bar over runs whose postfix says the simulated time and the time left."""
 
-    def __init__(self, bar: Any, t0: float, t_end: float, runs: int) -> None:
+    def __init__(self, bar: tqdm[NoReturn], t0: float, t_end: float, runs: int) -> None:
         self.bar, self.t0, self.span, self.runs = bar, t0, t_end - t0, runs
         self.t_end = t_end
 
@@ -130,7 +133,7 @@ def _left(seconds: float) -> str:
     return str(tqdm.format_interval(seconds))
 
 
-def horizon_bar(runs: int, t0: float, t_end: float, desc: str, *, enabled: bool | None = None) -> Any:
+def horizon_bar(runs: int, t0: float, t_end: float, desc: str, *, enabled: bool | None = None) -> _HorizonBar:
     """A bar for ``runs`` runs over ``[t0, t_end]``, advanced by the simulated time of each run.
 
     ``update(k)`` adds ``k`` runs, fractions included: a run that has simulated to ``t``

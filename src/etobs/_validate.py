@@ -137,7 +137,7 @@ def batch(name: str, value: Any, n: int) -> np.ndarray:
     return arr
 
 
-def function(name: str, value: Any) -> Callable[..., Any]:
+def function(name: str, value: object) -> Callable[..., Any]:
     """Check that ``value`` is callable."""
     if not callable(value):
         raise InputTypeError(f"`{name}` must be callable; got {shown(value)} ({type(value).__name__})")
