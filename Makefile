@@ -16,10 +16,11 @@ $(VENV)/.installed-%: pyproject.toml
 demo: $(VENV)/.installed-plot
 	$(BIN)/etobs demo robot-arm --out robot-arm-out
 
-## test: lint, the whole test suite (slow tests included), the benchmarks in quick mode
+## test: lint, type check (mypy), the whole test suite (slow tests included), the benchmarks in quick mode
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/ruff format --check src tests benchmarks examples
+	$(BIN)/mypy
 	$(BIN)/python -m pytest --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
@@ -44,4 +45,4 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_tune.py
 
 clean:
-	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis
