@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, TypedDict, TypeVar
+from typing import TYPE_CHECKING, Protocol, TypeAlias, TypedDict, TypeVar
 
 from etobs.errors import InputError
 
@@ -44,6 +44,8 @@ if TYPE_CHECKING:  # for the annotations only: the sensor node runs without nump
 #: What the formulas compute on, elementwise: floats (the sensor node, the engine's
 #: compiled model) or float arrays (the rule objects, on a batch of runs).
 R = TypeVar("R", float, "NDArray[np.float64]")
+#: One of them, where a function takes either (:func:`apply`).
+Value: TypeAlias = "float | NDArray[np.float64]"
 
 
 class Limits(TypedDict):
@@ -183,11 +185,6 @@ def k_kind(name: object) -> KKind:
     if kind is None:
         raise InputError(f"unknown K-function kind {name!r}; the kinds are {', '.join(K_KINDS)}")
     return kind
-
-
-def k_value(kind: str, k1: float, k2: float, s: R) -> R:
-    """The K-function of kind ``kind`` (a name) with numbers ``k1, k2`` at ``s`` (a float or an array)."""
-    return k_kind(kind).value(k1, k2, s)
 
 
 # ---- rules ---------------------------------------------------------------------------
@@ -395,10 +392,38 @@ def split_arg(arg: str) -> tuple[str, str] | None:
     return slot, at
 
 
-def evaluate(
-    formula: Formula, value: Callable[[str], float | NDArray[np.float64]]
-) -> float | NDArray[np.float64]:
-    """``formula`` applied to its arguments, each given by ``value(name)``."""
+def apply(
+    formula: Formula,
+    e: Value | None,
+    y: Value | None,
+    s: Value | None,
+    k: Callable[[str, Value], Value],
+    number: Callable[[str], float],
+) -> Value:
+    """``formula`` at ``|e_i| = e``, ``|ytilde_i| = y`` and state ``s`` (floats, or arrays of a batch).
+
+    ``k(slot, at)`` is the value of the K-function of ``slot`` at ``at`` and
+    ``number(name)`` a number of the rule. The one reading of a formula's arguments
+    (module docstring), for the batched rules and the sensor node; the engine's model
+    writes the same reading as text (:mod:`etobs.estimation._model_source`).
+
+    Raises
+    ------
+    InputError
+        When the formula reads ``e``, ``y`` or ``s`` and it is not given.
+
+    """
+    given = {"e": e, "y": y, "s": s}
+
+    def value(arg: str) -> Value:
+        if arg in given:
+            out = given[arg]
+            if out is None:
+                raise InputError(f"the formula {formula.fn.__name__} reads `{arg}`; it was not given")
+            return out
+        split = split_arg(arg)
+        return number(arg) if split is None else k(split[0], value(split[1]))
+
     return formula.fn(*(value(a) for a in formula.args))
 
 

@@ -85,7 +85,8 @@ def by_formula(kind: fm.RuleKind, what: str, rule, e: float, y: float, s: float)
         k, k1, k2, _ = fn.engine_form()
         return float(k.value(k1, k2, at))
 
-    return float(fm.evaluate(getattr(kind, what), value))
+    formula = getattr(kind, what)
+    return float(formula.fn(*(value(a) for a in formula.args)))
 
 
 # ---- the registries: every kind has its class and its forms --------------------------
@@ -139,8 +140,8 @@ def test_every_k_kind_inverts_and_prints(name):
     [
         (lambda: fm.rule_kind("magic"), r"unknown rule kind 'magic'; the kinds are dynamic, static"),
         (lambda: fm.k_kind("cubic"), r"unknown K-function kind 'cubic'; the kinds are linear, quadratic"),
-        (lambda: fm.k_value("cubic", 1.0, 0.0, 2.0), r"unknown K-function kind 'cubic'"),
-        (lambda: fm.k_value(0, 1.0, 0.0, 2.0), r"unknown K-function kind 0"),
+        (lambda: fm.k_kind(0), r"unknown K-function kind 0"),
+        (lambda: fm.rule_kind(None), r"unknown rule kind None"),
         (lambda: Custom(lambda s: s).sensor_spec("gamma"), r"`gamma` is Custom"),
     ],
 )

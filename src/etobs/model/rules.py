@@ -163,52 +163,35 @@ class KindRule(TriggerRule):
             return np.array([getattr(self, self.kind.period or "") - getattr(self, name)])
         return np.array([getattr(self, name)])
 
-    def _values(self, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None) -> Any:
-        """The kind's arguments for a batch: ``|e|``, ``|y|``, the state, K-values, numbers."""
-        cache: dict[str, Any] = {}
+    def _k(self, slot: str, at: Any) -> Any:
+        """The K-function of ``slot`` at ``at`` (a constant slot's number, as a batch)."""
+        fn = getattr(self, slot)
+        return fm.constant(fn, 0.0, at) if isinstance(fn, float) else fn(at)
 
-        def value(arg: str) -> Any:
-            if arg not in cache:
-                cache[arg] = self._value(arg, e, s, y, value)
-            return cache[arg]
-
-        return value
-
-    def _value(self, arg: str, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None, value: Any) -> Any:
-        if arg == "e":
-            assert e is not None
-            return _norm(e)
-        if arg == "y":
-            if y is None:
-                raise InputError(f"{type(self).__name__}.trigger needs the current measurement `y`; got None")
-            return _norm(y)
-        if arg == "s":
-            return s[:, 0]
-        split = fm.split_arg(arg)
-        if split is None:
-            return getattr(self, arg)
-        fn = getattr(self, split[0])
-        at = value(split[1])
-        if isinstance(fn, float):  # a constant slot
-            return fm.constant(fn, 0.0, at)
-        return fn(at)
+    def _apply(self, what: str, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None) -> np.ndarray:
+        """The kind's formula ``what`` on a batch, as a ``(B,)`` array (:func:`etobs.formulas.apply`)."""
+        formula = getattr(self.kind, what)
+        state = s[:, 0] if s.shape[1] else None
+        norm_e, norm_y = (None if a is None else _norm(a) for a in (e, y))
+        out = fm.apply(formula, norm_e, norm_y, state, self._k, lambda name: float(getattr(self, name)))
+        return np.broadcast_to(np.asarray(out, dtype=float), (s.shape[0],)).copy()
 
     def derivative(
         self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
     ) -> np.ndarray:
         if self.kind.flow is None:
             return np.empty((t.shape[0], 0))
-        out = fm.evaluate(self.kind.flow, self._values(e, s, y))
-        return np.broadcast_to(np.asarray(out, dtype=float), (t.shape[0],))[:, None].copy()
+        return self._apply("flow", e, s, y)[:, None]
 
     def trigger(self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        return np.asarray(fm.evaluate(self.kind.trigger, self._values(e, s, y)))
+        if self.kind.reads_y and y is None:
+            raise InputError(f"{type(self).__name__}.trigger needs the current measurement `y`; got None")
+        return self._apply("trigger", e, s, y)
 
     def reset(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         if self.kind.reset is None:
             return s
-        out = fm.evaluate(self.kind.reset, self._values(None, s, None))
-        return np.broadcast_to(np.asarray(out, dtype=float), (s.shape[0],))[:, None].copy()
+        return self._apply("reset", None, s, None)[:, None]
 
     def engine_form(self) -> EngineForm:
         numbers = {n.name: float(getattr(self, n.name)) for n in self.kind.numbers}

@@ -125,18 +125,11 @@ class SampledRule:
             # fire at the sample of time `first`, then every `every` samples (as PeriodicRule)
             self.count = self.every - round(first / self.period) - 1
 
-    def _value(self, arg: str, e: float, y: float) -> float:
-        """The kind's argument ``arg`` (:mod:`etobs.formulas`) at this sample."""
-        if arg == "e":
-            return e
-        if arg == "y":
-            return y
-        if arg == "s":
-            return self.eta
-        split = fm.split_arg(arg)
-        if split is None:
-            return self.numbers[arg]
-        return _k(self.k[split[0]], self._value(split[1], e, y))
+    def _apply(self, formula: fm.Formula, e: float, y: float, s: float) -> float:
+        """The kind's ``formula`` at this sample (:func:`etobs.formulas.apply`)."""
+        return float(
+            fm.apply(formula, e, y, s, lambda slot, at: _k(self.k[slot], float(at)), self.numbers.__getitem__)
+        )
 
     def decide(self, e: Sequence[float], y: Sequence[float]) -> bool:
         """Whether to send at this sample, given the gap ``e = ybar - y`` and ``y``.
@@ -150,21 +143,17 @@ class SampledRule:
                 self.count = 0
             return fire
         r, ym = _norm(e), _norm(y)
-        fire = fm.evaluate(self.kind.trigger, lambda a: self._value(a, r, ym)) >= 0.0
+        fire = self._apply(self.kind.trigger, r, ym, self.eta) >= 0.0
         if self.kind.state == "none":
             return bool(fire)
         assert self.kind.flow is not None and self.kind.reset is not None  # an eta state has both
         if fire:
-            self.eta = fm.evaluate(self.kind.reset, lambda a: self._value(a, r, ym))  # e.g. eq. (14), jump
+            self.eta = self._apply(self.kind.reset, r, ym, self.eta)  # e.g. eq. (14), jump
             r = 0.0
-        flow, held = self.kind.flow, r  # e.g. eq. (14) over the period, |e| held
+        flow = self.kind.flow
 
-        def f(s: float) -> float:
-            saved, self.eta = self.eta, s
-            try:
-                return float(fm.evaluate(flow, lambda a: self._value(a, held, ym)))
-            finally:
-                self.eta = saved
+        def f(s: float) -> float:  # e.g. eq. (14) over the period, |e| held
+            return self._apply(flow, r, ym, s)
 
         decay = self.k.get(self.kind.decay or "")
         rate = decay[1] if decay is not None and decay[0] is fm.LINEAR else None
