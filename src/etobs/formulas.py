@@ -172,19 +172,20 @@ CONSTANT = KKind("constant", (_positive("value"),), constant, None, "{value:g}")
 K_KINDS: dict[str, KKind] = {k.name: k for k in (LINEAR, QUADRATIC, POWER, CONSTANT)}
 
 
-def k_kind(name: object) -> KKind:
-    """The K-function kind called ``name``.
+_K = TypeVar("_K")
 
-    Raises
-    ------
-    InputError
-        For a name no kind has (there is no fallback).
 
-    """
-    kind = K_KINDS.get(name) if isinstance(name, str) else None
+def _lookup(registry: dict[str, _K], name: object, what: str) -> _K:
+    """The kind called ``name`` in ``registry``; any other name raises, naming ``what`` and the kinds."""
+    kind = registry.get(name) if isinstance(name, str) else None
     if kind is None:
-        raise InputError(f"unknown K-function kind {name!r}; the kinds are {', '.join(K_KINDS)}")
+        raise InputError(f"unknown {what} kind {name!r}; the kinds are {', '.join(registry)}")
     return kind
+
+
+def k_kind(name: object) -> KKind:
+    """The K-function kind called ``name`` (an unknown name raises: there is no fallback)."""
+    return _lookup(K_KINDS, name, "K-function")
 
 
 # ---- rules ---------------------------------------------------------------------------
@@ -370,18 +371,8 @@ RULE_KINDS: dict[str, RuleKind] = {k.name: k for k in (DYNAMIC, STATIC, PERIODIC
 
 
 def rule_kind(name: object) -> RuleKind:
-    """The rule kind called ``name``.
-
-    Raises
-    ------
-    InputError
-        For a name no kind has (there is no fallback).
-
-    """
-    kind = RULE_KINDS.get(name) if isinstance(name, str) else None
-    if kind is None:
-        raise InputError(f"unknown rule kind {name!r}; the kinds are {', '.join(RULE_KINDS)}")
-    return kind
+    """The rule kind called ``name`` (an unknown name raises: there is no fallback)."""
+    return _lookup(RULE_KINDS, name, "rule")
 
 
 def split_arg(arg: str) -> tuple[str, str] | None:
