@@ -16,11 +16,14 @@ $(VENV)/.installed-%: pyproject.toml
 demo: $(VENV)/.installed-plot
 	$(BIN)/etobs demo robot-arm --out robot-arm-out
 
-## test: lint, type check (mypy), the whole test suite (slow tests included), the benchmarks in quick mode
-test: $(VENV)/.installed-test
+## lint: ruff (lint and format) and mypy (strict where pyproject.toml says)
+lint: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/ruff format --check src tests benchmarks examples
 	$(BIN)/mypy
+
+## test: lint, the whole test suite (slow tests included), the benchmarks in quick mode
+test: lint
 	$(BIN)/python -m pytest --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
