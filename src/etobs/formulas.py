@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, TypeAlias, TypedDict, TypeVar
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypedDict, TypeVar
 
 from etobs.errors import InputError
 
@@ -247,12 +248,48 @@ def generalized_trigger(
     return gamma_e + weight * gamma_check_e - sigma * weight * alpha_check_eta - eps
 
 
+def split_arg(arg: str) -> tuple[str, str] | None:
+    """``"gamma(e)"`` -> ``("gamma", "e")``; ``None`` for an argument that is not a K-function's."""
+    if not arg.endswith(")") or "(" not in arg:
+        return None
+    slot, _, at = arg[:-1].partition("(")
+    return slot, at
+
+
+_GIVEN = ("e", "y", "s")
+
+
 @dataclass(frozen=True)
 class Formula:
-    """A formula of a rule and the names of its arguments, in order (module docstring)."""
+    """A formula of a rule and the names of its arguments, in order (module docstring).
+
+    ``plan`` is the arguments read once: ``(0, i, -1)`` the ``i``-th of ``e, y, s``,
+    ``(1, name, -1)`` a number, ``(2, slot, i)`` the K-function of ``slot`` at the
+    ``i``-th of ``e, y, s``; ``reads`` the names of ``e, y, s`` it reads.
+    """
 
     fn: Callable[..., float | NDArray[np.float64]]
     args: tuple[str, ...]
+    plan: tuple[tuple[int, str | int, int], ...] = field(init=False, repr=False, compare=False)
+    reads: frozenset[str] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        plan: list[tuple[int, str | int, int]] = []
+        for arg in self.args:
+            split = split_arg(arg)
+            if arg in _GIVEN:
+                plan.append((0, _GIVEN.index(arg), -1))
+            elif split is None:
+                plan.append((1, arg, -1))
+            elif split[1] in _GIVEN:
+                plan.append((2, split[0], _GIVEN.index(split[1])))
+            else:
+                raise InputError(
+                    f"the argument {arg!r} of {self.fn.__name__}: K-functions are read at e, y or s"
+                )
+        object.__setattr__(self, "plan", tuple(plan))
+        read = {_GIVEN[a] for w, a, _ in plan if w == 0 and isinstance(a, int)}
+        object.__setattr__(self, "reads", frozenset(read | {_GIVEN[i] for w, _, i in plan if w == 2}))
 
 
 @dataclass(frozen=True)
@@ -306,7 +343,7 @@ class RuleKind:
         """The name of the number that sets the initial state (``eta0``, ``first``), if any."""
         return {"eta": "eta0", "clock": "first"}.get(self.state)
 
-    @property
+    @cached_property
     def reads_y(self) -> bool:
         """Whether a formula reads the current measurement ``|ytilde_i|``."""
         return any("y" in f.args for f in self.formulas())
@@ -318,6 +355,11 @@ class RuleKind:
     def number_names(self) -> tuple[str, ...]:
         """The names of its numbers."""
         return tuple(n.name for n in self.numbers)
+
+    @cached_property
+    def constants(self) -> frozenset[str]:
+        """The slots a number may stand for (:attr:`Slot.constant`)."""
+        return frozenset(slot.name for slot in self.slots if slot.constant)
 
 
 _SIGMA = Number("sigma", lower=0.0)
@@ -375,47 +417,52 @@ def rule_kind(name: object) -> RuleKind:
     return _lookup(RULE_KINDS, name, "rule")
 
 
-def split_arg(arg: str) -> tuple[str, str] | None:
-    """``"gamma(e)"`` -> ``("gamma", "e")``; ``None`` for an argument that is not a K-function's."""
-    if not arg.endswith(")") or "(" not in arg:
-        return None
-    slot, _, at = arg[:-1].partition("(")
-    return slot, at
+def evaluator(
+    formula: Formula, constants: frozenset[str] = frozenset()
+) -> Callable[[Any, Value | None, Value | None, Value | None], Value]:
+    """``formula`` as a function ``(rule, e, y, s)``: a rule object, ``|e_i|``, ``|ytilde_i|``, the state.
 
-
-def apply(
-    formula: Formula,
-    e: Value | None,
-    y: Value | None,
-    s: Value | None,
-    k: Callable[[str, Value], Value],
-    number: Callable[[str], float],
-) -> Value:
-    """``formula`` at ``|e_i| = e``, ``|ytilde_i| = y`` and state ``s`` (floats, or arrays of a batch).
-
-    ``k(slot, at)`` is the value of the K-function of ``slot`` at ``at`` and
-    ``number(name)`` a number of the rule. The one reading of a formula's arguments
-    (module docstring), for the batched rules and the sensor node; the engine's model
-    writes the same reading as text (:mod:`etobs.estimation._model_source`).
-
-    Raises
-    ------
-    InputError
-        When the formula reads ``e``, ``y`` or ``s`` and it is not given.
-
+    The one reading of a formula's arguments (module docstring), for the batched rules
+    (numpy arrays) and the sensor node (floats): ``rule.<number>`` is a number and
+    ``rule.<slot>`` the K-function of a slot, a callable, or for the slots named in
+    ``constants`` possibly a number standing for a constant (:func:`k_at`). Written as
+    Python text from the plan and compiled once per formula, as the engine's model is
+    (:mod:`etobs.estimation._model_source`), so that it costs what the formula written by
+    hand does.
     """
-    given = {"e": e, "y": y, "s": s}
+    key = (id(formula), constants)
+    done = _EVALUATORS.get(key)
+    if done is not None:
+        return done
+    parts = []
+    for what, a, at in formula.plan:
+        if what == 0:
+            parts.append(_GIVEN[int(a)])
+        elif what == 1:
+            parts.append(f"rule.{a}")
+        elif a in constants:
+            parts.append(f"K(rule.{a}, {_GIVEN[at]})")
+        else:
+            parts.append(f"rule.{a}({_GIVEN[at]})")
+    text = f"def {formula.fn.__name__}(rule, e, y, s):\n    return F({', '.join(parts)})\n"
+    namespace: dict[str, Any] = {"F": formula.fn, "K": k_at}
+    exec(compile(text, f"<etobs formula {formula.fn.__name__}>", "exec"), namespace)
+    _EVALUATORS[key] = namespace[formula.fn.__name__]
+    return _EVALUATORS[key]
 
-    def value(arg: str) -> Value:
-        if arg in given:
-            out = given[arg]
-            if out is None:
-                raise InputError(f"the formula {formula.fn.__name__} reads `{arg}`; it was not given")
-            return out
-        split = split_arg(arg)
-        return number(arg) if split is None else k(split[0], value(split[1]))
 
-    return formula.fn(*(value(a) for a in formula.args))
+def k_at(fn: Any, at: R) -> R:
+    """The K-function ``fn`` at ``at``; a number ``fn`` stands for the constant (:data:`CONSTANT`)."""
+    if isinstance(fn, float):
+        return constant(fn, 0.0, at)
+    out: R = fn(at)
+    return out
+
+
+#: The evaluators by (formula, constant slots); the formulas are the registries' own, never freed.
+_EVALUATORS: dict[
+    tuple[int, frozenset[str]], Callable[[Any, Value | None, Value | None, Value | None], Value]
+] = {}
 
 
 # ---- integration over a sampling period ----------------------------------------------

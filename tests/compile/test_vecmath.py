@@ -94,3 +94,28 @@ def test_a_loop_over_sixteen_lanes_is_vector_code_without_a_call_to_libm():
     ir = "\n".join(sixteen_lanes.inspect_llvm().values())
     assert re.search(r"<\d+ x double>", ir), "the lane loop was not vectorized"
     assert not re.search(r"call [^\n]*@(llvm\.)?sin", ir)
+
+
+def test_the_constants_are_pi_and_the_factorials():
+    # pi by Machin's formula in 80 digits: pi/2 = PIO2_1 + PIO2_2 + PIO2_3 to 1e-36, the first
+    # two with 33 significant bits (k * PIO2_i exact for |k| < 2^20), and 2/pi rounded
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 80
+
+    def atan_inv(n):
+        x, total, k = Decimal(1) / n, Decimal(0), 0
+        term = x
+        while abs(term) > Decimal(10) ** -79:
+            total += term / (2 * k + 1)
+            term *= -x * x
+            k += 1
+        return total
+
+    pi = 16 * atan_inv(5) - 4 * atan_inv(239)
+    assert abs(pi / 2 - Decimal(vm.PIO2_1) - Decimal(vm.PIO2_2) - Decimal(vm.PIO2_3)) < Decimal(10) ** -36
+    for part in (vm.PIO2_1, vm.PIO2_2):
+        mantissa = int(math.frexp(part)[0] * 2**53)
+        assert mantissa % 2**20 == 0  # at most 33 significant bits
+    assert vm.TWO_OVER_PI == float(2 / pi)
+    assert [vm.S1, vm.S8, vm.C1, vm.C9] == [-1 / 6, 1 / math.factorial(17), -0.5, -1 / math.factorial(18)]

@@ -10,7 +10,7 @@ spec name fails here.
 """
 
 import re
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -249,7 +249,14 @@ def test_every_kind_round_trips_through_the_comparison_spec(name):
     rule = rule_of(name)
     assert name in SPEC_KINDS
     table = {"name": "x", "kind": name} | {k: getattr(rule, k) for k in SPEC_KINDS[name]}
-    assert _rule("rules[0]", table).make(0, 1, rule) == rule
+    # on a base of other numbers (and K-functions): the entry's numbers are taken
+    other = rule_classes()[name](**{f.name: getattr(rule_of(name, 1), f.name) for f in fields(rule)})
+    changed = {
+        n.name: (0.5 if n.upper else 2.0) * getattr(other, n.name) for n in fm.RULE_KINDS[name].numbers
+    }
+    other = replace(other, **changed)
+    made = _rule("rules[0]", table).make(0, 1, other)
+    assert {k: getattr(made, k) for k in SPEC_KINDS[name]} == {k: getattr(rule, k) for k in SPEC_KINDS[name]}
     bare = {"name": "x", "kind": name}
     if fm.RULE_KINDS[name].slots:  # a kind with K-functions takes what it is not given from the base rule
         assert _rule("rules[0]", bare).make(0, 1, rule) == rule

@@ -11,9 +11,10 @@ split in three doubles, the first two of 33 significant bits (so ``k * PIO2_1`` 
 ``k * PIO2_2`` are exact for ``|k| < 2^20``); then the Taylor polynomials of ``sin`` (to
 ``r^17``) and ``cos`` (to ``r^18``) on ``|r| <= pi/4``, whose truncation errors there are
 below ``1e-19`` (``(pi/4)^19 / 19!`` and ``(pi/4)^20 / 20!``), evaluated by Horner in
-``r^2``, and the quadrant ``k mod 4`` selected without a branch. The constants are
-computed from ``pi`` (Machin's formula, 80 digits, ``decimal``) and from ``1/n!``, not
-copied from any library.
+``r^2``, and the quadrant ``k mod 4`` selected without a branch. The parts of ``pi/2`` were
+computed from ``pi`` by Machin's formula in 80 digits (``decimal``; the test recomputes
+and checks them), the polynomial coefficients are ``1/n!`` computed here; nothing is
+copied from a library.
 
 **Accuracy** (tested against ``math.sin``/``math.cos`` on 2·10^5 points a range): at most
 2 ulp for ``|x| <= 2^20 pi/2`` (about 1.6e6, :data:`EXACT_UP_TO`); beyond that the

@@ -107,10 +107,11 @@ class RuleEntry:
     def make(self, node: int, n_nodes: int, base: TriggerRule) -> TriggerRule:
         """The rule of this entry for ``node``, whose base rule is ``base``.
 
-        The kind's K-functions are the base rule's of the same slot name (``gamma``). A
-        number the entry does not give is the base rule's of that name when the kind takes
-        K-functions from it (so it means the same: ``eps`` of ``static`` on a dynamic base),
-        else the class default; one with neither is an error naming the key.
+        A kind with K-functions takes them from the base rule, which must have each of them
+        (``static`` takes ``gamma``), and with them every number the entry does not give
+        (so it means the same: ``eps`` of ``static`` on a dynamic base); a base rule of the
+        kind's own class or a subclass of it (a rule of your own) is changed only in the
+        keys given. A kind without K-functions is built from the entry and its defaults.
         """
         p = {k: self.value(k, node, n_nodes) for k in self.params}
         try:
@@ -119,22 +120,21 @@ class RuleEntry:
             if self.kind == "send_on_delta":
                 return send_on_delta(p["delta"])
             cls = RULE_CLASSES[self.kind]
+            if isinstance(base, cls):
+                return replace(base, **p)
+            lacking = [slot.name for slot in cls.kind.slots if not hasattr(base, slot.name)]
+            if lacking:
+                raise SpecError(
+                    f"`{self.where}`: kind {self.kind!r} takes `{'`, `'.join(lacking)}` from the base rule, "
+                    f"but node {node}'s {type(base).__name__} has none"
+                )
             args: dict[str, Any] = {}
-            slots = {slot.name for slot in cls.kind.slots}
             for f in fields(cls):
                 if f.name in p:
                     args[f.name] = p[f.name]
-                elif hasattr(base, f.name) and (f.name in slots or _carries(cls)):
+                elif hasattr(base, f.name) and _carries(cls):
                     args[f.name] = getattr(base, f.name)
-                elif f.default is MISSING and f.default_factory is MISSING:
-                    shown_as = (
-                        f"`{self.where}.{f.name}`" if f.name in RULE_KINDS[self.kind] else f"`{f.name}`"
-                    )
-                    raise SpecError(
-                        f"{shown_as} is missing: kind {self.kind!r} needs it and node {node}'s base rule "
-                        f"{type(base).__name__} has none"
-                    )
-            return cls(**args)
+            return cls(**args)  # the keys without a default are required by the parser
         except SpecError:
             raise
         except EtobsError as exc:

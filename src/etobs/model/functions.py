@@ -12,15 +12,15 @@ engine and the sensor nodes also run.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError
-from etobs.formulas import K_KINDS, LINEAR, POWER, QUADRATIC, KKind
+from etobs.formulas import CONSTANT, K_KINDS, LINEAR, POWER, QUADRATIC, KKind
 
 
 class KFunction(ABC):
@@ -66,10 +66,13 @@ class Builtin(KFunction):
     def __post_init__(self) -> None:
         for n in self.kind.numbers:
             object.__setattr__(self, n.name, v.real(n.name, getattr(self, n.name), **n.limits()))
+        vals = [float(getattr(self, n.name)) for n in self.kind.numbers]
+        # ``k1, k2`` once (not a field: the reference evaluates the function at every step)
+        object.__setattr__(self, "_k12", (vals[0], vals[1] if len(vals) > 1 else 0.0))
 
     def _numbers(self) -> tuple[float, float]:
-        vals = [float(getattr(self, n.name)) for n in self.kind.numbers]
-        return vals[0], vals[1] if len(vals) > 1 else 0.0
+        k12: tuple[float, float] = self.__dict__["_k12"]
+        return k12
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         k1, k2 = self._numbers()
@@ -113,16 +116,38 @@ class Power(Builtin):
     kind: ClassVar[KKind] = POWER
 
 
-def k_classes() -> dict[str, type[Builtin]]:
-    """The K-function classes of etobs by kind name (the kinds of :data:`etobs.formulas.K_KINDS`)."""
-    out: dict[str, type[Builtin]] = {}
-    todo = list(Builtin.__subclasses__())
+_C = TypeVar("_C", bound=type)
+
+
+def declared(base: _C, registry: Mapping[str, object], what: str) -> dict[str, _C]:
+    """The classes of etobs below ``base`` that declare a kind (``kind = ...``), by the kind's name.
+
+    In the order of ``registry``; a kind declared twice, or a kind without a class, raises
+    (a kind is declared with its class).
+    """
+    out: dict[str, _C] = {}
+    todo = list(base.__subclasses__())
     while todo:
         cls = todo.pop()
         todo += cls.__subclasses__()
         if "kind" in cls.__dict__ and cls.__module__.startswith("etobs."):
-            out[cls.kind.name] = cls
-    return {name: out[name] for name in K_KINDS if name in out}
+            name = cls.__dict__["kind"].name
+            if name in out:
+                raise InputError(f"{what} kind {name!r} has two classes: {out[name]} and {cls}")
+            out[name] = cls
+    missing = set(registry) - set(out)
+    if missing:
+        raise InputError(f"{what} kinds without a class in etobs.model: {', '.join(sorted(missing))}")
+    return {name: out[name] for name in registry}
+
+
+def k_classes() -> dict[str, type[Builtin]]:
+    """The K-function classes of etobs by kind name (the kinds of :data:`etobs.formulas.K_KINDS`).
+
+    The constant weight (``CONSTANT``) has none: a number stands for it.
+    """
+    kinds = {name: k for name, k in K_KINDS.items() if k is not CONSTANT}
+    return declared(Builtin, kinds, "K-function")
 
 
 _PROBE = np.array([0.0, 1e-3, 0.1, 1.0, 10.0, 1e3])

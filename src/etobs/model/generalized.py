@@ -72,6 +72,4 @@ class GeneralizedRule(KindRule):
 
     def weight(self, eta: np.ndarray) -> np.ndarray:
         """``d'(eta)``."""
-        if isinstance(self.d_prime, float):
-            return np.asarray(fm.constant(self.d_prime, 0.0, np.asarray(eta, dtype=float)))
-        return self.d_prime(eta)
+        return np.asarray(fm.k_at(self.d_prime, np.asarray(eta, dtype=float)))

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from etobs import _validate as v
 from etobs import formulas as fm
 from etobs.errors import InputError
-from etobs.model.functions import KFunction, Linear, as_kfunction
+from etobs.model.functions import KFunction, Linear, as_kfunction, declared
 
 
 @dataclass(frozen=True)
@@ -111,14 +111,19 @@ class TriggerRule(ABC):
 
 
 def engine_form_of(rule: TriggerRule) -> EngineForm | None:
-    """``rule.engine_form()`` when the rule's own class declares its kind, else ``None``.
+    """``rule.engine_form()`` when the rule is a kind of etobs, else ``None`` (:func:`registered`)."""
+    return rule.engine_form() if registered(rule) else None
 
-    Only a class that declares ``kind`` itself is run by the engine: a subclass of a
-    built-in rule that changes its trigger would otherwise run as its parent.
+
+def registered(rule: TriggerRule) -> bool:
+    """Whether ``rule`` is one of etobs' kinds as declared: its own class names a registered kind.
+
+    A subclass of a built-in rule that changes its trigger, or a class naming a kind of
+    its own, is a rule of your own: the engine and the sensor node do not run it (they
+    would run its parent, or fail), the scipy reference does.
     """
-    if "kind" not in type(rule).__dict__:
-        return None
-    return rule.engine_form()
+    kind = type(rule).__dict__.get("kind")
+    return isinstance(kind, fm.RuleKind) and fm.RULE_KINDS.get(kind.name) is kind
 
 
 class KindRule(TriggerRule):
@@ -163,18 +168,17 @@ class KindRule(TriggerRule):
             return np.array([getattr(self, self.kind.period or "") - getattr(self, name)])
         return np.array([getattr(self, name)])
 
-    def _k(self, slot: str, at: Any) -> Any:
-        """The K-function of ``slot`` at ``at`` (a constant slot's number, as a batch)."""
-        fn = getattr(self, slot)
-        return fm.constant(fn, 0.0, at) if isinstance(fn, float) else fn(at)
-
     def _apply(self, what: str, e: np.ndarray | None, s: np.ndarray, y: np.ndarray | None) -> np.ndarray:
-        """The kind's formula ``what`` on a batch, as a ``(B,)`` array (:func:`etobs.formulas.apply`)."""
-        formula = getattr(self.kind, what)
-        state = s[:, 0] if s.shape[1] else None
-        norm_e, norm_y = (None if a is None else _norm(a) for a in (e, y))
-        out = fm.apply(formula, norm_e, norm_y, state, self._k, lambda name: float(getattr(self, name)))
-        return np.broadcast_to(np.asarray(out, dtype=float), (s.shape[0],)).copy()
+        """The kind's formula ``what`` on a batch, as a ``(B,)`` array (:func:`etobs.formulas.evaluator`)."""
+        formula: fm.Formula = getattr(self.kind, what)
+        reads = formula.reads
+        state = s[:, 0] if "s" in reads else None
+        norm_e = _norm(e) if e is not None and "e" in reads else None
+        norm_y = _norm(y) if y is not None and "y" in reads else None
+        out = fm.evaluator(formula, self.kind.constants)(self, norm_e, norm_y, state)
+        if isinstance(out, np.ndarray) and out.shape == (s.shape[0],):
+            return out
+        return np.full(s.shape[0], out, dtype=float)  # a constant (a clock's flow and reset)
 
     def derivative(
         self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
@@ -200,6 +204,8 @@ class KindRule(TriggerRule):
         )
 
     def sensor_spec(self) -> dict[str, Any]:
+        if not registered(self):
+            return super().sensor_spec()  # refused: a rule of your own
         spec: dict[str, Any] = {"kind": self.kind.name}
         for slot in self.kind.slots:
             fn = getattr(self, slot.name)
@@ -220,21 +226,7 @@ def rule_classes() -> dict[str, type[KindRule]]:
 
     """
     # importing this module ran etobs/model/__init__.py, which defines every class of etobs
-    out: dict[str, type[KindRule]] = {}
-    todo = list(KindRule.__subclasses__())
-    while todo:
-        cls = todo.pop()
-        todo += cls.__subclasses__()
-        if "kind" in cls.__dict__ and cls.__module__.startswith("etobs."):
-            if cls.kind.name in out:
-                raise InputError(
-                    f"rule kind {cls.kind.name!r} has two classes: {out[cls.kind.name]} and {cls}"
-                )
-            out[cls.kind.name] = cls
-    missing = set(fm.RULE_KINDS) - set(out)
-    if missing:
-        raise InputError(f"rule kinds without a class in etobs.model: {', '.join(sorted(missing))}")
-    return {name: out[name] for name in fm.RULE_KINDS}
+    return declared(KindRule, fm.RULE_KINDS, "rule")
 
 
 @dataclass(frozen=True)

@@ -29,11 +29,14 @@ period in ``eta'``. Both vanish as ``T -> 0``. The decision at a sample is: send
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
+from types import SimpleNamespace
 from typing import Any
 
 from etobs import formulas as fm
+from etobs.errors import InputError
 
 #: A K-function as a node runs it: its kind and two numbers (:mod:`etobs.formulas`).
 KFn = tuple[fm.KKind, float, float]
@@ -68,18 +71,22 @@ def k_function(spec: Any, key: str, constant: bool = False) -> KFn:
     shown = " or ".join(
         f"[{', '.join([repr(k.name), *(n.name for n in k.numbers)])}]" for k in kinds.values()
     )
+    if spec is None:
+        raise RuleSpecError(f"rule spec: missing key `{key}`")
     if not isinstance(spec, Sequence) or isinstance(spec, str) or not spec:
         raise RuleSpecError(f"rule spec: `{key}` must be a list like {shown}; got {spec!r}")
     name, *args = spec
-    kind = kinds.get(name) if isinstance(name, str) else None
-    if kind is None or len(args) != len(kind.numbers):
+    try:
+        kind: fm.KKind | None = fm.k_kind(name)
+    except InputError:
+        kind = None
+    if kind is None or kind is fm.CONSTANT or len(args) != len(kind.numbers):
         raise RuleSpecError(f"rule spec: `{key}` must be {shown}; got {spec!r}")
-    vals = [_number({n.name: a}, n.name, n) for n, a in zip(kind.numbers, args, strict=True)]
+    vals = [
+        _number({f"{key}[{i + 1}]": a}, f"{key}[{i + 1}]", n)  # named as in the spec: gamma[1]
+        for i, (n, a) in enumerate(zip(kind.numbers, args, strict=True))
+    ]
     return kind, vals[0], vals[1] if len(vals) > 1 else 0.0
-
-
-def _k(fn: KFn, s: float) -> float:
-    return float(fn[0].value(fn[1], fn[2], s))
 
 
 def _norm(v: Sequence[float]) -> float:
@@ -104,14 +111,26 @@ class SampledRule:
             raise RuleSpecError(f"rule spec must be a mapping; got {type(spec).__name__}")
         self.period = _number({"period": period}, "period", fm.Number("period", lower=0.0, lower_open=True))
         name = spec.get("kind")
-        if not isinstance(name, str) or name not in fm.RULE_KINDS:
-            raise RuleSpecError(f"rule spec: `kind` must be one of {', '.join(fm.RULE_KINDS)}; got {name!r}")
-        self.kind = fm.RULE_KINDS[name]
+        try:
+            self.kind = fm.rule_kind(name)
+        except InputError:
+            raise RuleSpecError(
+                f"rule spec: `kind` must be one of {', '.join(fm.RULE_KINDS)}; got {name!r}"
+            ) from None
         self.k = {
             slot.name: k_function(spec.get(slot.name), slot.name, slot.constant) for slot in self.kind.slots
         }
         self.numbers = {n.name: _number(spec, n.name, n) for n in self.kind.numbers}
-        self.eta = _number(spec, "eta0") if self.kind.state == "eta" else 0.0
+        # what the kind's formulas read (etobs.formulas.evaluator): numbers and K-functions by name
+        self._rule = SimpleNamespace(
+            **self.numbers,
+            **{
+                slot: kv[1] if kv[0] is fm.CONSTANT else functools.partial(kv[0].value, kv[1], kv[2])
+                for slot, kv in self.k.items()
+            },
+        )
+        initial = self.kind.initial
+        self.eta = _number(spec, initial) if self.kind.state == "eta" and initial else 0.0
         if self.kind.state == "clock":
             own = self.numbers[self.kind.period or ""]
             every = own / self.period
@@ -125,11 +144,9 @@ class SampledRule:
             # fire at the sample of time `first`, then every `every` samples (as PeriodicRule)
             self.count = self.every - round(first / self.period) - 1
 
-    def _apply(self, formula: fm.Formula, e: float, y: float, s: float) -> float:
-        """The kind's ``formula`` at this sample (:func:`etobs.formulas.apply`)."""
-        return float(
-            fm.apply(formula, e, y, s, lambda slot, at: _k(self.k[slot], float(at)), self.numbers.__getitem__)
-        )
+    def _apply(self, formula: fm.Formula, e: float, y: float | None, s: float) -> float:
+        """The kind's ``formula`` at this sample (:func:`etobs.formulas.evaluator`)."""
+        return float(fm.evaluator(formula, self.kind.constants)(self._rule, e, y, s))
 
     def decide(self, e: Sequence[float], y: Sequence[float]) -> bool:
         """Whether to send at this sample, given the gap ``e = ybar - y`` and ``y``.
@@ -142,7 +159,7 @@ class SampledRule:
             if fire:
                 self.count = 0
             return fire
-        r, ym = _norm(e), _norm(y)
+        r, ym = _norm(e), (_norm(y) if self.kind.reads_y else None)
         fire = self._apply(self.kind.trigger, r, ym, self.eta) >= 0.0
         if self.kind.state == "none":
             return bool(fire)
