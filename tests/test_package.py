@@ -43,3 +43,27 @@ def test_the_paper_is_credited_to_its_authors_in_the_readme_and_the_citation_fil
     )
     license_text = root.joinpath("LICENSE").read_text(encoding="utf-8")
     assert license_text.startswith("BSD 3-Clause License")  # pyproject says BSD-3-Clause
+
+
+def test_the_public_names_are_read_from_a_zip_too(tmp_path):
+    # the stub is read as package data: etobs imported from a zip archive has its names
+    import subprocess
+    import sys
+    import zipfile
+    from pathlib import Path
+
+    src = Path(etobs.__file__).parent
+    archive = tmp_path / "etobs.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        for f in src.rglob("*"):
+            if f.suffix in (".py", ".pyi") and "__pycache__" not in f.parts:
+                z.write(f, Path("etobs") / f.relative_to(src))
+    code = (
+        "import sys; sys.meta_path[:] = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]; "
+        f"sys.path.insert(0, {str(archive)!r}); import etobs; "
+        "print(etobs.__file__.startswith(sys.path[0]), len(etobs.__all__), etobs.Linear.__name__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert out.stdout.split() == ["True", str(len(etobs.__all__)), "Linear"]

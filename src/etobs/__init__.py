@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.resources
 from functools import cache
-from pathlib import Path
 from typing import Any
 
 from etobs._version import __version__ as __version__
@@ -32,8 +32,19 @@ _SUBPACKAGES = frozenset(
 
 @cache
 def _exports() -> dict[str, str]:
-    """Public name -> the module that defines it, read from ``__init__.pyi``."""
-    tree = ast.parse(Path(__file__).with_suffix(".pyi").read_text(encoding="utf-8"))
+    """Public name -> the module that defines it, read from ``__init__.pyi``.
+
+    Read as package data (``importlib.resources``), so that etobs imported from a zip
+    reads it too; a bundle made without it is told so.
+    """
+    try:
+        text = importlib.resources.files(__name__).joinpath("__init__.pyi").read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ImportError(
+            "etobs lists its public names in etobs/__init__.pyi, which this installation lacks "
+            "(a bundler that drops .pyi files: include it as package data)"
+        ) from exc
+    tree = ast.parse(text)
     return {
         alias.asname or alias.name: node.module
         for node in tree.body
