@@ -9,23 +9,24 @@ import pytest
 
 from etobs.compile import vecmath as vm
 
-SIN, COS = vm.jitted()["sin"], vm.jitted()["cos"]  # numba needs the dispatchers as globals
+JITTED = vm.jitted()
+SIN, COS = JITTED["sin"], JITTED["cos"]  # numba needs the dispatchers as globals
 
 
-@numba.njit
-def many_sin(x):
-    out = np.empty_like(x)
-    for i in range(x.size):
-        out[i] = SIN(x[i])
-    return out
+def _many(fn):
+    """``fn`` of every entry of an array, in a compiled loop."""
+
+    @numba.njit
+    def many(x):
+        out = np.empty_like(x)
+        for i in range(x.size):
+            out[i] = fn(x[i])
+        return out
+
+    return many
 
 
-@numba.njit
-def many_cos(x):
-    out = np.empty_like(x)
-    for i in range(x.size):
-        out[i] = COS(x[i])
-    return out
+many_sin, many_cos = _many(SIN), _many(COS)
 
 
 @numba.njit

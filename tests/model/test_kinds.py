@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 
 from etobs import EstimationProblem, Node, Observer, Plant, SaveAt, simulate
 from etobs import formulas as fm
+from etobs._spec import SpecError
 from etobs.errors import InputError
 from etobs.estimation import _model_source as ms
 from etobs.experiments.compare_spec import RULE_KINDS as SPEC_KINDS
@@ -261,7 +262,7 @@ def test_every_kind_round_trips_through_the_comparison_spec(name):
     if fm.RULE_KINDS[name].slots:  # a kind with K-functions takes what it is not given from the base rule
         assert _rule("rules[0]", bare).make(0, 1, rule) == rule
     else:  # one without is built from the entry: the keys without a default are required
-        with pytest.raises(Exception, match=r"missing key `rules\[0\]\."):
+        with pytest.raises(SpecError, match=r"missing key `rules\[0\]\."):
             _rule("rules[0]", bare)
 
 
@@ -297,3 +298,28 @@ def kinds_table() -> str:
 def test_the_docs_table_of_kinds_is_the_registry():
     text = DOCS.read_text()
     assert kinds_table() in text, "docs/extensions.md must hold this table of kinds:\n" + kinds_table()
+
+
+@pytest.mark.parametrize(
+    ("table", "base", "message"),
+    [
+        (
+            {"kind": "periodic", "period": 0.5, "first": -1.0},
+            "static",
+            r"`rules\[0\]`, node 0: `first` must be >= 0; got -1",
+        ),
+        (
+            {"kind": "static"},
+            "periodic",
+            r"`rules\[0\]`: kind 'static' takes `gamma` from the base rule, but node 0",
+        ),
+        (
+            {"kind": "dynamic"},
+            "generalized",
+            r"kind 'dynamic' takes `alpha` from the base rule, but node 0's Gen",
+        ),
+    ],
+)
+def test_a_comparison_entry_the_base_rule_cannot_complete_names_the_entry(table, base, message):
+    with pytest.raises(SpecError, match=message):
+        _rule("rules[0]", {"name": "x"} | table).make(0, 1, rule_of(base))
