@@ -10,6 +10,7 @@ from etobs.errors import EtobsError as EtobsError
 from etobs.errors import InputError as InputError
 from etobs.errors import InputTypeError as InputTypeError
 from etobs.errors import ModelError as ModelError
+from etobs.errors import PerformanceWarning as PerformanceWarning
 from etobs.estimation import EstimationProblem as EstimationProblem
 from etobs.estimation import EstimationResult as EstimationResult
 from etobs.estimation import Trajectory as Trajectory

@@ -1,4 +1,4 @@
-"""All exceptions raised by etobs, in one place.
+"""All exceptions raised by etobs, and its one warning of its own, in one place.
 
 Every input check raises :class:`InputError` (a :class:`ValueError`) or
 :class:`InputTypeError` (a :class:`TypeError`) with a message that names the
@@ -47,3 +47,11 @@ class ModelError(InputError):
 
 class DesignError(EtobsError):
     """A design problem (LMI, parameter choice) has no solution, or the solver failed."""
+
+
+class PerformanceWarning(RuntimeWarning):
+    """etobs runs something on a slower path than it could, and says why (the numbers are the same).
+
+    For example a model whose lane form is not vector code (docs/solver.md). Silence it
+    with ``warnings.filterwarnings("ignore", category=etobs.PerformanceWarning)``.
+    """

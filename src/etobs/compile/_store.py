@@ -12,6 +12,7 @@ its back: a stage of the step, the state before a jump).
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 from numba.core import types
@@ -24,11 +25,31 @@ def store(r: Any, out: Any, n: int) -> int:
     raise NotImplementedError("compiled only")  # pragma: no cover
 
 
-@overload(store)
-def _store(r: Any, out: Any, n: Any) -> Any:
-    if isinstance(r, types.Array) and not isinstance(r.dtype, types.Complex):
+#: Results up to this length are copied by code written out element by element: a loop
+#: whose length the compiler learns only where the call is inlined stays a loop, which
+#: keeps a loop over lanes around it from becoming vector instructions.
+WRITTEN_OUT = 64
 
-        def from_array(r: Any, out: Any, n: Any) -> Any:
+
+@functools.cache
+def _written_out(check: str, count: int) -> Any:
+    """``out[0] = r[0]; ...; out[count-1] = r[count-1]`` after ``if check: return 2``, as a function."""
+    lines = ["def impl(r, out, n):", f"    if {check}:", "        return 2"]
+    lines += [f"    out[{i}] = r[{i}]" for i in range(count)]
+    lines.append("    return 1")
+    namespace: dict[str, Any] = {}
+    exec("\n".join(lines), namespace)
+    return namespace["impl"]
+
+
+@overload(store, prefer_literal=True, inline="always")
+def _store(r, out, n):  # type: ignore[no-untyped-def]  # numba: the implementations' signature must be the typer's
+    count = n.literal_value if isinstance(n, types.IntegerLiteral) else -1
+    if isinstance(r, types.Array) and not isinstance(r.dtype, types.Complex):
+        if 0 <= count <= WRITTEN_OUT:
+            return _written_out("r.shape[0] != n", count)
+
+        def from_array(r, out, n):  # type: ignore[no-untyped-def]
             if r.shape[0] != n:
                 return 2
             for i in range(n):
@@ -38,7 +59,7 @@ def _store(r: Any, out: Any, n: Any) -> Any:
         return from_array
     if isinstance(r, types.List) and isinstance(r.dtype, (types.Float, types.Integer)):
         # a Python list, as the reference accepts (it calls np.asarray)
-        def from_list(r: Any, out: Any, n: Any) -> Any:
+        def from_list(r, out, n):  # type: ignore[no-untyped-def]
             if len(r) != n:
                 return 2
             for i in range(n):
@@ -48,8 +69,10 @@ def _store(r: Any, out: Any, n: Any) -> Any:
         return from_list
     if isinstance(r, (types.UniTuple, types.Tuple)) and not any(isinstance(a, types.Complex) for a in r):
         m = len(r)
+        if m <= WRITTEN_OUT:  # its length is in its type
+            return _written_out(f"n != {m}", m)
 
-        def from_tuple(r: Any, out: Any, n: Any) -> Any:
+        def from_tuple(r, out, n):  # type: ignore[no-untyped-def]
             if m != n:
                 return 2
             for i in range(n):

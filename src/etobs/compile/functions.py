@@ -23,11 +23,13 @@ The machine code is cached on disk under a hash of the function's content (see
 
 from __future__ import annotations
 
+import functools
 import re
 import threading
 import types
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from etobs.compile.fingerprint import _names, fingerprint
@@ -118,7 +120,23 @@ class CompiledFunction:
 
 
 #: Version of the cached wrappers' layout (part of the cache key).
-_FORMAT = 6
+_FORMAT = 8
+#: etobs' own files whose text decides how a user function is compiled (how it is
+#: inlined, which ``sin`` it calls, how its result is stored): their hash is part of
+#: every cache key, so that code cached by another version of them is never linked.
+_OWN = ("functions.py", "_store.py", "_stack.py", "vecmath.py", "ccall.py", "fingerprint.py")
+
+
+@functools.cache
+def _format() -> str:
+    """:data:`_FORMAT`, numba's version and a hash of :data:`_OWN`: what every cache key starts with."""
+    import numba
+
+    here = Path(__file__).parent
+    own = _hash_text("".join((here / name).read_text(encoding="utf-8") for name in _OWN))
+    return f"{_FORMAT}-{own}-{numba.__version__}"
+
+
 _MEMO: dict[str, CompiledFunction] = {}
 _MEMO_MODULES: dict[str, tuple[CompiledFunction, ...]] = {}
 _LOCK = threading.Lock()
@@ -158,7 +176,7 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
 
     _refuse_non_function(fn, name)
     source = spec.source()
-    key = fingerprint(fn) + "-" + _hash_text(f"{_FORMAT}{source}{numba.__version__}")
+    key = fingerprint(fn) + "-" + _hash_text(f"{_format()}{source}")
     with _LOCK:
         done = _MEMO.get(key)
         if done is not None:
@@ -185,15 +203,21 @@ def compile_function(fn: Any, spec: FunctionSpec, name: str) -> CompiledFunction
 
 
 def compile_module(
-    text: str, users: dict[str, Any], entries: tuple[str, ...], what: str
+    text: str, users: dict[str, Any], entries: tuple[str, ...], what: str, *, inline: bool = True
 ) -> tuple[CompiledFunction, ...]:
     """Compile the C functions ``entries`` of a generated module that calls user functions.
 
     ``text`` defines every name of ``entries`` as a function of :func:`c_signature`; it may
     call ``carray``, ``readonly``, ``store``, ``np`` and the user functions ``users`` by
-    their global names. Each user function is compiled on its own and cached under its fingerprint
+    their global names, compile its own functions with ``jit`` or ``inline`` (numba
+    inlines those where they are called) and take arrays on its stack
+    (:mod:`etobs.compile._stack`). Each user function is compiled on its own and cached under its fingerprint
     (so editing one recompiles only it and this module); the module links them. Memoized,
     and cached on disk by the text and the user functions' fingerprints.
+
+    With ``inline`` the user functions are inlined into the module by numba (so that a
+    loop over lanes that calls them can become vector instructions); without, LLVM
+    inlines them where it can.
 
     Raises
     ------
@@ -205,11 +229,12 @@ def compile_module(
     import numba
     import numpy as np
 
+    from etobs.compile._stack import stack_f8, stack_i8
     from etobs.compile._store import readonly, store
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
     parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
-    key = _hash_text(f"{_FORMAT}{text}{' '.join(parts)}{numba.__version__}")
+    key = _hash_text(f"{_format()}{inline}{entries}{text}{' '.join(parts)}")
     with _LOCK:
         done = _MEMO_MODULES.get(key)
         if done is not None:
@@ -223,13 +248,22 @@ def compile_module(
             "readonly": readonly,
             "store": store,
             "np": np,
+            "jit": numba.njit(error_model="numpy"),
+            "inline": numba.njit(inline="always", error_model="numpy"),
+            "stack_f8": stack_f8,
+            "stack_i8": stack_i8,
             KEY: key,
         }
-        namespace.update({g: _jitted(fn, memo, cached) for g, fn in users.items()})
+        namespace.update({g: _jitted(fn, memo, cached, inline) for g, fn in users.items()})
         exec(compile(text, f"<etobs {what}>", "exec"), namespace)
+        # every function the text defines is named by the module's content (the entries and
+        # the helpers they call alike): two models' `body` must never link as one symbol
+        for value in list(namespace.values()):
+            fn = getattr(value, "py_func", value)
+            if isinstance(fn, types.FunctionType) and fn.__globals__ is namespace and not hasattr(fn, NAMED):
+                _name_by_content(fn, key)
         out = []
         for entry in entries:
-            _name_by_content(namespace[entry], key)
             try:
                 cf = _load_or_compile(namespace[entry], cached, f"{entry} of the {what}")
             except Exception as exc:  # numba raises many types; all mean "cannot compile"
@@ -327,7 +361,9 @@ def _name_by_content(fn: Any, key: str) -> None:
     from ``x = 1`` completed instead of blowing up). With the content in the name, two
     functions share a symbol only when they compile to the same code.
     """
-    fn.__qualname__ = f"{fn.__qualname__}#{_hash_text(key)}"
+    # a name numba can build identifiers from (it names an inlined function's variables so)
+    fn.__qualname__ = f"{fn.__qualname__}_h{_hash_text(key)}"
+    setattr(fn, NAMED, True)
 
 
 def _hash_text(text: str) -> str:
@@ -336,8 +372,11 @@ def _hash_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
+def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False, inline: bool = False) -> Any:
     """``fn`` as a numba function, with the Python functions it calls compiled too.
+
+    With ``inline``, numba inlines each where it is called (``inline="always"``), else
+    LLVM does (``forceinline``) once the code is linked.
 
     With ``cached``, each is compiled on its own and its machine code kept in the disk
     cache under its fingerprint (:mod:`etobs.compile.cache`): code that calls it links
@@ -345,6 +384,7 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     """
     import numba
 
+    from etobs.compile import vecmath
     from etobs.compile.cache import KEY
 
     if hasattr(fn, "py_func"):
@@ -354,8 +394,12 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     if id(fn) in memo:
         return memo[id(fn)]
 
+    swap = vecmath.replacements()
+
     def convert(value: Any) -> Any:
-        return _jitted(value, memo, cached) if isinstance(value, types.FunctionType) else value
+        if id(value) in swap:  # libm's sin and cos: the engine's, which vectorize
+            return swap[id(value)]
+        return _jitted(value, memo, cached, inline) if isinstance(value, types.FunctionType) else value
 
     glb = dict(fn.__globals__)
     # numba imports a compiled function's module again when it loads it from the disk
@@ -369,13 +413,18 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False) -> Any:
     clone = types.FunctionType(fn.__code__, glb, fn.__name__, fn.__defaults__, cells or None)
     clone.__qualname__ = fn.__qualname__
     if cached:
-        glb[KEY] = f"fn-{fingerprint(fn)}-{_FORMAT}-{numba.__version__}"
+        glb[KEY] = f"fn-{fingerprint(fn)}-{_format()}-{inline}"
         _name_by_content(clone, glb[KEY])
-    out = numba.njit(error_model="numpy", cache=cached)(clone)
+    # inlined where it is called: numba's inlining puts it into the caller's module before
+    # LLVM optimizes it, so that a loop over lanes that calls it can become vector code
+    how: dict[str, Any] = {"inline": "always"} if inline else {"forceinline": True}
+    out = numba.njit(error_model="numpy", cache=cached, **how)(clone)
     memo[id(fn)] = out
     return out
 
 
+#: The attribute of a function already named by its content (:func:`_name_by_content`).
+NAMED = "_etobs_named"
 #: The attribute of a user function that says where its code comes from, when not written
 #: by the user as such (a python-control system's updfcn): messages name it too.
 ORIGIN = "etobs_origin"
@@ -417,7 +466,7 @@ def _cannot_compile(name: str, exc: Exception, origin: str = "") -> str:
 def _reason(exc: Exception) -> str:
     """Numba's reason in one line (with the call it could not type, when it names one)."""
     skip = ("Failed in nopython mode", "During:", "File ", "Traceback", "-", "^", "There are")
-    text = re.sub(r"#[0-9a-f]{16}", "", str(exc))  # the content hash in names (_name_by_content)
+    text = re.sub(r"_h[0-9a-f]{16}", "", str(exc))  # the content hash in names (_name_by_content)
     lines = [line.strip() for line in text.splitlines()]
     for k, text in enumerate(lines):
         if text and not text.startswith(skip):

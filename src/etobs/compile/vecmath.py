@@ -26,7 +26,9 @@ the engine reports as a ``nonfinite`` run rather than a silent value. ``sin(-0.0
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import Any
 
 #: ``pi/2`` in three parts (the first two with 33 significant bits, the third the rest).
 PIO2_1 = float.fromhex("0x1.921fb54400000p+0")
@@ -80,23 +82,25 @@ def _quadrant(k: float, s: float, c: float, shift: float) -> float:
 
 
 def sin(x: float) -> float:
-    """``sin x`` to 2 ulp for ``|x| <= EXACT_UP_TO`` (module docstring); vectorizable."""
-    if x == 0.0:
-        return x  # keeps the sign of -0.0
-    if not abs(x) < HUGE:
-        return math.nan  # also nan and inf
+    """``sin x`` to 2 ulp for ``|x| <= EXACT_UP_TO`` (module docstring); vectorizable.
+
+    Everything is computed, then the special cases are selected (no early return: a
+    branch around the polynomials keeps a loop over lanes from becoming vector code).
+    """
     k, r = _reduce(x)
-    return _quadrant(k, _sin_poly(r), _cos_poly(r), 0.0)
+    v = _quadrant(k, _sin_poly(r), _cos_poly(r), 0.0)
+    v = x if x == 0.0 else v  # keeps the sign of -0.0
+    return v if abs(x) < HUGE else math.nan  # also nan and inf
 
 
 def cos(x: float) -> float:
     """``cos x`` to 2 ulp for ``|x| <= EXACT_UP_TO`` (module docstring); vectorizable."""
-    if not abs(x) < HUGE:
-        return math.nan  # also nan and inf
     k, r = _reduce(x)
-    return _quadrant(k, _sin_poly(r), _cos_poly(r), 1.0)
+    v = _quadrant(k, _sin_poly(r), _cos_poly(r), 1.0)
+    return v if abs(x) < HUGE else math.nan  # also nan and inf
 
 
+@functools.cache
 def jitted() -> dict[str, object]:
     """``sin`` and ``cos`` compiled by numba, inlined where they are called (``inline="always"``).
 
@@ -113,3 +117,72 @@ def jitted() -> dict[str, object]:
         fn = globals()[name]
         namespace[name] = numba.njit(inline="always")(types.FunctionType(fn.__code__, namespace, name))
     return {"sin": namespace["sin"], "cos": namespace["cos"]}
+
+
+def _sin_any(x: object) -> object:
+    """``np.sin`` as the engine compiles it: :func:`sin` on floats and on arrays, element by element."""
+    import numpy as np
+
+    return np.sin(x)
+
+
+def _cos_any(x: object) -> object:
+    """``np.cos`` as the engine compiles it (see :func:`_sin_any`)."""
+    import numpy as np
+
+    return np.cos(x)
+
+
+@functools.cache
+def replacements() -> dict[int, object]:
+    """What the engine compiles in a user's function in place of libm's ``sin`` and ``cos``.
+
+    By ``id`` of what a function's global names may refer to: the modules ``numpy`` and
+    ``math`` become modules that forward every attribute but ``sin`` and ``cos``, and
+    ``np.sin``, ``np.cos``, ``math.sin``, ``math.cos`` (imported by name) the functions of
+    this module, for floats and for arrays (element by element). Anything else (complex
+    numbers) is left to numba's ``np.sin``.
+    """
+    import types as pytypes
+
+    import numpy as np
+    from numba.core import types
+    from numba.extending import overload
+
+    fns = jitted()
+
+    def typer(scalar: Any, libm: Any) -> Any:
+        # no annotations: numba requires the implementations' signature to be the typer's
+        def typed(x):  # type: ignore[no-untyped-def]
+            if isinstance(x, types.Float | types.Integer | types.Boolean):
+                return lambda x: scalar(float(x))
+            if isinstance(x, types.Array) and isinstance(x.dtype, types.Float | types.Integer):
+
+                def each(x):  # type: ignore[no-untyped-def]
+                    out = np.empty(x.shape)
+                    for idx in np.ndindex(x.shape):
+                        out[idx] = scalar(float(x[idx]))
+                    return out
+
+                return each
+            return lambda x: libm(x)
+
+        return typed
+
+    overload(_sin_any, inline="always")(typer(fns["sin"], np.sin))
+    overload(_cos_any, inline="always")(typer(fns["cos"], np.cos))
+    # numba compiles a call of _sin_any by its overload above; Python never calls it there
+    sin_any, cos_any = _sin_any, _cos_any
+    out: dict[int, object] = {
+        id(np.sin): sin_any,
+        id(np.cos): cos_any,
+        id(math.sin): sin_any,
+        id(math.cos): cos_any,
+    }
+    for mod in (np, math):
+        proxy = pytypes.ModuleType(f"etobs_vecmath_{mod.__name__}")
+        proxy.__getattr__ = functools.partial(getattr, mod)  # type: ignore[method-assign]  # PEP 562
+        proxy.sin = sin_any  # type: ignore[attr-defined]
+        proxy.cos = cos_any  # type: ignore[attr-defined]
+        out[id(mod)] = proxy
+    return out

@@ -32,6 +32,7 @@ from etobs import formulas as fm
 from etobs.compile.functions import FunctionSpec, params_call
 from etobs.estimation import _network_jumps
 from etobs.estimation.calls import model_specs
+from etobs.hybrid.compiled import LANES
 from etobs.model.fates import LINK_WIDTH
 from etobs.model.rules import EngineForm
 from etobs.model.signals import CONSTANT as SIG_CONSTANT
@@ -62,7 +63,10 @@ def _helpers() -> dict[str, Callable[..., Any]]:
 
     The one implementation of each in :mod:`etobs.formulas` (numba compiles and inlines it).
     """
+    from etobs.compile import vecmath
+
     out: dict[str, Callable[..., Any]] = {f"K_{k.name.upper()}": k.value for k in fm.K_KINDS.values()}
+    out["SIN"] = vecmath.jitted()["sin"]  # vectorizes in the lane form (a libm call does not)
     for kind in fm.RULE_KINDS.values():
         for what in ("trigger", "flow", "reset"):
             formula = getattr(kind, what)
@@ -97,6 +101,8 @@ class ModelSource:
         The blocks of the parameter vector, in order.
     n_work : int
         Length of the run's scratch array.
+    lanes : bool
+        Whether the text defines the lane form ``est_lanes`` (:data:`LANE_STACK`).
 
     """
 
@@ -107,6 +113,7 @@ class ModelSource:
     specs: dict[str, FunctionSpec] = field(default_factory=dict)
     numbers: list[np.ndarray] = field(default_factory=list)
     n_work: int = 0
+    lanes: bool = False
     _size: int = 0
 
     @property
@@ -342,31 +349,98 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     if network >= 0:
         c.lines(_network_tables(lay.channels, network))
     c.line("")
-    # one C function (:func:`etobs.compile.functions.c_signature`), compiled once: the
-    # kernel calls it as the flow with k = -1, the guard with k = -2 and the jump of rule
-    # k >= 0, and gives each run a scratch array of n_work + 1 floats
-    c.line("def est(k, t, qp, cfp, wp, a3, iap, pp, outp):")
+    # the model of one run, on 1-D arrays: the flow (k = -1) into ``out``, the guard (k = -2)
+    # into ``out``, the jump of rule k >= 0 into ``q``; it returns a status
+    rows = max(lay.n, len(nodes) * (2 if network >= 0 else 1))
+    c.line("def body(k, t, q, p, work, out):")
     c.indent()
-    c.line(f"q = carray(qp, ({lay.n},))")
-    c.line(f"p = carray(pp, ({src.size},))")
-    c.line(f"work = carray(wp, ({src.n_work + 1},))")
     c.line("if k == -1:")
     c.indent()
-    c.line(f"dq = carray(outp, ({lay.n},))")
+    c.line("dq = out")
     _flow(c, at, groups, lay.n_flow or lay.n)
     c.line("return 1")
     c.dedent()
     c.line("if k == -2:")
     c.indent()
-    c.line(f"g = carray(outp, ({len(nodes) * (2 if network >= 0 else 1)},))")
+    c.line("g = out")
     _guard(c, at, groups)
     c.line("return 1")
     c.dedent()
     _jump(c, at, groups)
     c.line("return 1")
     c.dedent()
+    c.line("")
+    # compiled as a function of its own for ``est``: numba inlines a function into the
+    # caller's IR, where it drops writes into an array made by carray that nothing reads
+    # after them (a jump's last write into q was lost); inlined into ``est_lanes``' loop,
+    # which writes only into arrays read after the loop (checked by lane_form_agrees)
+    c.line("BODY = jit(body)")
+    c.line("BODY_LANES = inline(body)")
+    c.line("")
+    # two C functions (:func:`etobs.compile.functions.c_signature`) of the one body: the
+    # kernel calls ``est`` as the flow with k = -1, the guard with k = -2 and the jump of
+    # rule k >= 0 of one run, with a scratch array of n_work + 1 floats, and ``est_lanes``
+    # as the flow or guard of the lanes lo .. hi-1 of W (etobs.hybrid.compiled.CompiledSystem)
+    c.line("def est(k, t, qp, cfp, wp, a3, iap, pp, outp):")
+    c.line(
+        f"    return BODY(k, t, carray(qp, ({lay.n},)), carray(pp, ({src.size},)), "
+        f"carray(wp, ({src.n_work + 1},)), carray(outp, ({rows},)))"
+    )
+    c.line("")
+    src.lanes = _lane_form_fits(src.n_work + 1, rows)
+    if src.lanes:
+        _lanes(c, src, lay.n, lay.n_flow or lay.n, rows, len(nodes) * (2 if network >= 0 else 1))
     src.text = c.text()
     return src
+
+
+#: Bytes of the lane form's arrays on its stack (scratch and results), at most: a model
+#: larger than this has no lane form (the kernel calls its one-run form lane by lane).
+LANE_STACK = 2**19
+#: Lanes the lane form computes, a constant of its code: the engine's lanes per thread.
+LANE_WIDTH = LANES
+
+
+def _lane_form_fits(n_work: int, rows: int) -> bool:
+    """Whether the lane form's scratch and results fit in :data:`LANE_STACK`."""
+    return (n_work + rows) * LANE_WIDTH * 8 <= LANE_STACK
+
+
+def _lanes(c: _Code, src: ModelSource, n: int, n_flow: int, rows: int, n_guard: int) -> None:
+    """``est_lanes``: the flow or guard of :data:`LANE_WIDTH` runs side by side.
+
+    The lanes' states and times are read where the kernel keeps them (the lane axis
+    last), their parameters from one row per lane (contiguous, as a function that
+    reshapes them needs); the scratch and the results are arrays on the stack, which nothing
+    the kernel passed can alias (:mod:`etobs.compile._stack`), copied out after the loop.
+    So LLVM may run the loop over lanes as vector instructions. One loop per function,
+    so that the body is inlined with a constant ``k``.
+    """
+    W, nw = LANE_WIDTH, src.n_work + 1
+    c.line("def est_lanes(k, t, qp, tp, wp, cfp, iap, pp, outp):")
+    c.indent()
+    c.line(f"st = carray(iap, ({3 + W},))")
+    c.line(f"q = carray(qp, ({n}, {W}))")
+    c.line(f"ts = carray(tp, ({W},))")
+    c.line(f"p = carray(pp, ({W}, {max(src.size, 1)}))  # one row per lane: contiguous")
+    c.line(f"out = carray(outp, ({rows}, {W}))")
+    c.line(f"work = carray(stack_f8({nw * W}), ({nw}, {W}))")
+    c.line(f"res = carray(stack_f8({rows * W}), ({rows}, {W}))")
+    c.line(f"sts = carray(stack_i8({W}), ({W},))")
+    # the flow's rows from n_flow on are not written, as the one-run form leaves them
+    for k, n_out in ((-1, n_flow), (-2, n_guard)):
+        c.line(f"if k == {k}:")
+        c.indent()
+        c.line(f"for lane in range({W}):")
+        c.line(f"    sts[lane] = BODY_LANES({k}, ts[lane], q[:, lane], p[lane], work[:, lane], res[:, lane])")
+        c.line(f"for i in range({n_out}):")
+        c.line(f"    for lane in range({W}):")
+        c.line("        out[i, lane] = res[i, lane]")
+        c.dedent()
+    c.line(f"for lane in range({W}):")
+    c.line("    st[3 + lane] = sts[lane]")
+    c.line("return 1")
+    c.dedent()
 
 
 def _network_tables(channels: Any, network: int) -> list[str]:
@@ -592,7 +666,7 @@ def _signal(which: int, sig: tuple[int, int, int], w0: int) -> list[str]:
         return [f"for ii in range({dim}):", f"    work[{w0} + ii] = p[{off} + ii]"]
     if kind == SIG_SINUSOID:  # amplitude * sin(omega t + phase) + offset
         return [
-            f"s = np.sin(p[{off + 2 * dim}] * t + p[{off + 2 * dim + 1}])",
+            f"s = SIN(p[{off + 2 * dim}] * t + p[{off + 2 * dim + 1}])",
             f"for ii in range({dim}):",
             f"    work[{w0} + ii] = s * p[{off} + ii] + p[{off + dim} + ii]",
         ]

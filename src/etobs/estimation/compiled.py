@@ -21,11 +21,14 @@ construction (a python-control ``InterconnectedSystem``, :mod:`etobs.model.pytho
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
 
-from etobs.errors import InputError, ModelError
+from etobs.errors import InputError, ModelError, PerformanceWarning
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.compiled import CompiledSystem
 from etobs.model.python_control import PYTHON_ONLY
@@ -84,25 +87,133 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     lay = problem.layout
     forms = [engine_form_of(ch.rule) for ch in lay.channels]
     src = ms.model_source(problem, forms)  # type: ignore[arg-type] - engine_support checked them
-    try:
-        fns = compile_module(src.text, {**src.users, **src.helpers}, ("est",), "estimation model")
-    except ModelError:
+    functions = {**src.users, **src.helpers}
+    one, why = None, ""
+    for inline in (True, False):  # numba inlines your functions; else LLVM does
+        try:
+            one = compile_module(src.text, functions, ("est",), "estimation model", inline=inline)[0]
+            break
+        except ModelError as exc:
+            why = why or str(exc)
+    if one is None:
         # name the user function at fault: each compiled on its own raises a ModelError naming it
         for glob, fn in src.users.items():
             compile_function(fn, src.specs[glob], src.names[glob])
-        raise
+        raise ModelError(why)
     params = np.concatenate(src.numbers) if src.numbers else np.zeros(0)
     names = problem.rule_names
     system = CompiledSystem(
         n=lay.n,
         n_rules=len(names),
-        addresses=(fns[0].address,) * 3,  # one function for flow, guard and jump
+        addresses=(one.address,) * 3,  # one function for flow, guard and jump
+        # and its lane form, compiled when a batch first fills a thread's lanes
+        lane_form=partial(_lane_form, problem, src, functions, one, params) if src.lanes else None,
+        lane_width=ms.LANE_WIDTH,
         n_params=params.size,
         n_work=src.n_work,
         n_flow=lay.n_flow,
         rule_names=names,
         function_names=ms.FUNCTIONS,
         log_columns=lay.sent_columns,  # the values sent, for the transmissions table
-        keep=fns,
+        keep=(one,),
     )
     return CompiledProblem(system=system, params=params)
+
+
+#: Each compiled model's lane form (by its one-run form's address): its address, or 0.
+_LANE_FORMS: dict[int, tuple[int, Any]] = {}
+
+
+def _lane_form(
+    problem: EstimationProblem, src: Any, functions: dict[str, Any], one: Any, params: np.ndarray
+) -> int:
+    """Compile (once per model and process) and check the lane form ``est_lanes``; its address or 0.
+
+    Your functions inlined by numba (vector code), else by LLVM (numba cannot inline some
+    closures: said with the note). A lane form that does not compile (it passes a run's
+    state as a strided view: a function that reshapes it does not) leaves the model
+    without one, said once: the engine then calls the one-run form lane by lane.
+    """
+    from etobs.compile.functions import compile_module
+
+    key = int(one.address)
+    if key in _LANE_FORMS:
+        return _LANE_FORMS[key][0]
+    lanes, why, not_inlined = None, "", ""
+    for inline in (True, False):
+        try:
+            lanes = compile_module(src.text, functions, ("est_lanes",), "estimation model", inline=inline)[0]
+            break
+        except ModelError as exc:
+            why = why or str(exc).removeprefix("the estimation model cannot be compiled: ")
+            not_inlined = why
+    if lanes is None:
+        _say_once(
+            f"etobs: this model has no lane form ({why}): the engine calls its one-run form lane by lane, "
+            "which gives the same numbers 2-4 times slower; a function that needs a contiguous state "
+            "(reshape) can take np.ascontiguousarray(x) (docs/solver.md)"
+        )
+        _LANE_FORMS[key] = (0, None)
+        return 0
+    address = _checked_lanes((one, lanes), problem, src, params, len(problem.rule_names), not_inlined)
+    _LANE_FORMS[key] = (address, lanes)  # keeps the compiled function alive
+    return address
+
+
+def _checked_lanes(
+    fns: Any, problem: EstimationProblem, src: Any, params: np.ndarray, n_rules: int, not_inlined: str
+) -> int:
+    """The lane form's address, once it gives every lane the one-run form's numbers (else 0).
+
+    Checked once per compiled model (:mod:`etobs.estimation._lane_probe`), with one
+    warning when it does not agree (a compiler fault: the engine then calls the one-run
+    form lane by lane) and one when it is not vector code (naming the functions and
+    what in them keeps it so, with its measured cost).
+    """
+    from etobs.estimation import _lane_probe as lp
+    from etobs.estimation._model_source import LANE_WIDTH
+
+    address = int(fns[1].address)
+    probe = lp.LaneProbe(fns[0], fns[1], _probe_states(problem, LANE_WIDTH), src.n_work + 1, n_rules, params)
+    if not probe.agrees():
+        _say_once(
+            "etobs: the lane form of this model's compiled code does not compute what its one-run form "
+            "does (a compiler fault; please report it); the engine calls the one-run form lane by lane, "
+            "which gives the right numbers 2-4 times slower",
+            RuntimeWarning,
+        )
+        return 0
+    # what keeps the lane form from being vector code, read from the user's functions (a
+    # timing alone would depend on the machine's load); its cost is measured to be said
+    found = [f"numba could not inline the model's functions into it ({not_inlined})"] if not_inlined else []
+    found += lp.blockers(src.users, src.names)
+    if found:
+        one, lane = probe.cost()
+        _say_once(
+            f"etobs: this model's lane form is not vector code: {'; '.join(found)}. Its flow costs "
+            f"{lane:.0f} ns per run and call in the lane form, {one:.0f} ns for one run alone (vector code "
+            "costs a fraction of it); the numbers are the same. Tuples of floats and math/np sin, cos, "
+            "sqrt and abs vectorize (docs/solver.md)"
+        )
+    return address
+
+
+def _probe_states(problem: EstimationProblem, W: int) -> np.ndarray:
+    """``W`` hybrid states of ``problem`` at ``t = 0`` from random plant, observer and output errors."""
+    rng = np.random.default_rng(0)
+    pl, ob = problem.plant, problem.observer
+    X, Z = rng.uniform(-1.0, 1.0, (W, pl.n_x)), rng.uniform(-1.0, 1.0, (W, ob.n_z))
+    try:
+        return problem.initial_state(X, Z, rng.uniform(-0.1, 0.1, (W, pl.n_y)), 0.0)
+    except Exception:  # a model that refuses these states (its own checks): the plant at rest
+        return problem.initial_state(np.zeros((W, pl.n_x)), np.zeros((W, ob.n_z)), np.zeros((W, pl.n_y)), 0.0)
+
+
+_SAID: set[str] = set()
+
+
+def _say_once(message: str, category: type[Warning] = PerformanceWarning) -> None:
+    """A warning, once per process and message (a sweep compiles its model in every chunk)."""
+    if message not in _SAID:
+        _SAID.add(message)
+        warnings.warn(message, category, stacklevel=4)

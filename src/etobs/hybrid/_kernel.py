@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeAlias, cast
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeAlias, cast
 
 import numba
 import numpy as np
@@ -68,7 +68,9 @@ EPS = np.finfo(np.float64).eps
 
 # Indices into the float and integer option vectors.
 F_RTOL, F_ATOL, F_MAX_STEP, F_FIRST_STEP, F_XTOL, F_ZENO_SPAN = 0, 1, 2, 3, 4, 5
-I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW, I_ZENO_JUMPS = 0, 1, 2, 3, 4, 5, 6
+I_MAX_JUMPS, I_MAX_STEPS, I_SAMPLES, I_KEEP_STEPS, I_N_WORK, I_N_FLOW, I_ZENO_JUMPS, I_N_RULES = range(8)
+#: A lane that holds no run (the queue is empty); it computes a copy of a running lane.
+IDLE = -100
 #: Slots of the system's functions in failure codes.
 FLOW, GUARD, JUMP = 1, 2, 3
 #: The flow's failure code when it moves an entry that n_flow says is constant.
@@ -81,6 +83,74 @@ K_FLOW, K_GUARD = -1, -2
 
 if TYPE_CHECKING:
     import ctypes
+
+
+class System(NamedTuple):
+    """What the kernel calls: the functions' addresses and the data they share.
+
+    ``addresses``: flow, guard and jump of one run, and the lane form of flow and guard
+    (0 when the system has none: the kernel then calls the one-run functions lane by
+    lane); ``ia`` and ``cf``: integer and float data shared by all runs.
+    """
+
+    addresses: NDArray[np.int64]
+    ia: NDArray[np.int64]
+    cf: NDArray[np.float64]
+
+
+class Problem(NamedTuple):
+    """The runs: initial states, parameter rows, ``span = (t0, t_end)`` and what to keep.
+
+    ``grid`` is the save grid, ``dist`` the distance pairs of ``SaveAt(max_distance=...)``,
+    ``log_cols`` the state entries logged at every jump.
+    """
+
+    x0: NDArray[np.float64]
+    params: NDArray[np.float64]
+    span: NDArray[np.float64]
+    grid: NDArray[np.float64]
+    dist: NDArray[np.int64]
+    log_cols: NDArray[np.int64]
+
+
+class Options(NamedTuple):
+    """The solver's options as numbers: floats at ``F_*``, integers at ``I_*``."""
+
+    f: NDArray[np.float64]
+    i: NDArray[np.int64]
+
+
+class Outputs(NamedTuple):
+    """Per run (indexed by the run): what the kernel writes when the run ends.
+
+    ``t_final`` is also written after every accepted step (the progress bar reads it).
+    """
+
+    status: NDArray[np.int64]
+    t_final: NDArray[np.float64]
+    j_final: NDArray[np.int64]
+    x_final: NDArray[np.float64]
+    n_steps: NDArray[np.int64]
+    n_rejected: NDArray[np.int64]
+    log_n: NDArray[np.int64]
+    arc_n: NDArray[np.int64]
+    grid_x: NDArray[np.float64]
+    grid_j: NDArray[np.int64]
+    grid_max: NDArray[np.float64]
+    error_code: NDArray[np.int64]
+
+
+class Logs(NamedTuple):
+    """Per slot (the run's position in the thread's queue): its jump log and arc points."""
+
+    rule: NDArray[np.int64]
+    t: NDArray[np.float64]
+    j: NDArray[np.int64]
+    x: NDArray[np.float64]
+    arc_t: NDArray[np.float64]
+    arc_j: NDArray[np.int64]
+    arc_x: NDArray[np.float64]
+
 
 #: What the system's functions read and write: a float64 array, or its address (an int).
 Pointer: TypeAlias = "NDArray[np.float64] | int"
@@ -153,6 +223,32 @@ def rows_at(base: int, offset: int, rows: int, cols: int) -> NDArray[np.float64]
     takes it).
     """
     return carray(_f8ptr(base + 8 * offset), (rows, cols))
+
+
+def _i8ptr_typing(typingctx: Any, addr: Any) -> tuple[Any, Callable[..., Any]]:
+    """``addr`` (an integer) as a pointer to int64."""
+    sig = types.CPointer(types.int64)(addr)  # type: ignore[no-untyped-call]  # untyped in numba's stubs
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], ir.IntType(64).as_pointer())
+
+    return sig, codegen
+
+
+#: ``_i8ptr(addr)``: the intrinsic, typed as compiled code calls it.
+_i8ptr = cast("Callable[[int], ctypes._Pointer[ctypes.c_int64]]", intrinsic(_i8ptr_typing))
+
+
+@numba.njit(inline="always", error_model="numpy")
+def ints_at(base: int, offset: int, size: int) -> NDArray[np.int64]:
+    """A 1-D int64 array of ``size`` at ``base + 8 offset`` (see :func:`rows_at`)."""
+    return carray(_i8ptr(base + 8 * offset), (size,))
+
+
+@numba.njit(inline="always", error_model="numpy")
+def cube_at(base: int, offset: int, a: int, b: int, c: int) -> NDArray[np.float64]:
+    """An ``(a, b, c)`` array at ``base + 8 offset`` (see :func:`rows_at`)."""
+    return carray(_f8ptr(base + 8 * offset), (a, b, c))
 
 
 @numba.njit(inline="always", error_model="numpy")
@@ -290,7 +386,11 @@ def build(method: str) -> Any:
         _BODY,
         lambda: tableau_constants(method),
         # error_model="numpy": 1/0 gives inf (then a named status), never an exception
-        {"jit": {"error_model": "numpy"}, "jit_nogil": {"nogil": True, "error_model": "numpy"}},
+        {
+            "jit": {"error_model": "numpy"},
+            "jit_inline": {"error_model": "numpy", "inline": "always"},
+            "jit_nogil": {"nogil": True, "error_model": "numpy"},
+        },
         depends=tuple(
             here / f
             for f in (

@@ -27,7 +27,15 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.hybrid.checks import check_log_columns, check_progress, check_sizes, span
 from etobs.hybrid.options import SaveAt, SolverOptions
-from etobs.hybrid.solution import GridMax, HybridArc, HybridSolution, JumpLog, SavedGrid, log_names
+from etobs.hybrid.solution import (
+    GridMax,
+    HybridArc,
+    HybridSolution,
+    JumpLog,
+    LaneStats,
+    SavedGrid,
+    log_names,
+)
 from etobs.hybrid.status import Status
 
 #: Jump-log rows and arc points kept per run on the first pass (runs with more are
@@ -44,6 +52,9 @@ RUNNING = int(Status.RUNNING)
 #: kernel writes each run's time after every accepted step (one store, no call), and the
 #: caller's thread reads them while the batch is solved in one pass on another thread.
 POLL = 0.2
+#: Runs a thread advances side by side in lanes (``solve_compiled(lanes=...)``): 16
+#: doubles fill two AVX-512 registers or four AVX2 ones.
+LANES = 16
 
 
 @dataclass(frozen=True)
@@ -58,6 +69,18 @@ class CompiledSystem:
         Number of jump rules.
     addresses : tuple of int
         Addresses of the flow, guard and jump C functions.
+    lane_form : callable, optional
+        Returns the address of the lane form of flow and guard (``0``: none; the kernel
+        then calls the one-run functions lane by lane); called (and so compiled) when a
+        batch first fills :attr:`lane_width` lanes. It is called as the one-run functions are
+        (:mod:`etobs.hybrid._kernel`), with ``a0`` the lanes' states (``n x W``, the lane
+        axis last), ``a1`` their times, ``a2`` their scratch (``n_work + 1 x W``), ``a3``
+        the shared floats, ``ia = [lo, hi, W, st_0, .., st_(W-1)]`` (it computes lanes
+        ``lo .. hi-1`` and writes each lane's status at ``st_l``), ``p`` the parameters
+        (``W x n_params``: one row per lane) and ``out`` the results (``rows x W``).
+    lane_width : int
+        The ``W`` the lane form computes (a constant of its code): the kernel calls it only
+        when it advances that many lanes.
     ia : ndarray of int64
         Integer data passed to every call.
     cf : ndarray of float64
@@ -85,6 +108,8 @@ class CompiledSystem:
     n: int
     n_rules: int
     addresses: tuple[int, int, int]
+    lane_form: Callable[[], int] | None = None
+    lane_width: int = 0
     ia: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
     cf: np.ndarray = field(default_factory=lambda: np.zeros(1))
     n_params: int = 0
@@ -190,6 +215,7 @@ def solve_compiled(
     save: SaveAt | None = None,
     parallel: bool = True,
     progress: Callable[[float], object] | None = None,
+    lanes: int | None = None,
 ) -> HybridSolution:
     """Solve a batch of runs of a :class:`CompiledSystem`.
 
@@ -213,6 +239,9 @@ def solve_compiled(
         t0)`` (a float; the calls sum to ``B``), e.g. a tqdm bar's ``update``. It is
         called on the caller's thread while the batch is solved in one pass on another;
         the numbers are the same as without it.
+    lanes : int, optional
+        Runs each thread advances side by side (default :data:`LANES`, at most the
+        thread's runs). A run's numbers do not depend on it.
 
     Returns
     -------
@@ -224,6 +253,8 @@ def solve_compiled(
         raise InputTypeError(f"`system` must be a CompiledSystem; got {type(system).__name__}")
     t0, t_end = span(t_span)
     progress = check_progress(progress)
+    if lanes is not None:
+        lanes = v.integer("lanes", lanes, lower=1)
     x = np.array(v.batch("x0", x0, system.n), dtype=float, order="C")
     B = x.shape[0]
     P = _params(params, system.n_params, B)
@@ -232,7 +263,7 @@ def solve_compiled(
     grid = np.empty(0) if save.grid is None else np.array(save.grid, dtype=float, order="C")
     dist = save.distance_pairs(system.n)
     out = _Buffers(B, system.n, grid.shape[0], reduce=dist.shape[0] > 0)
-    solve = partial(_solve_runs, system, x, P, t0, t_end, opts, save.steps, grid, dist, out, parallel)
+    solve = partial(_solve_runs, system, x, P, t0, t_end, opts, save.steps, grid, dist, out, parallel, lanes)
     logs: dict[int, tuple[np.ndarray, ...]] = {}
     arcs: dict[int, tuple[np.ndarray, ...]] = {}
     if progress is None:
@@ -254,6 +285,7 @@ def solve_compiled(
         backend="engine",
         failures=tuple(system.failure(c) if c else "" for c in out.error_code),
         grid_max=GridMax(grid, out.grid_max) if dist.size else None,
+        lanes=out.lanes,
     )
 
 
@@ -307,6 +339,7 @@ def _solve_runs(
     dist: np.ndarray,
     out: _Buffers,
     parallel: bool,
+    lanes: int | None,
     runs: np.ndarray,
     logs: dict[int, tuple[np.ndarray, ...]],
     arcs: dict[int, tuple[np.ndarray, ...]],
@@ -315,7 +348,21 @@ def _solve_runs(
     log_cap, arc_cap = capacities(runs.size, system.n, len(system.log_columns), keep_steps)
     while runs.size:
         part = _call(
-            system, x, P, t0, t_end, opts, keep_steps, grid, dist, runs, log_cap, arc_cap, out, parallel
+            system,
+            x,
+            P,
+            t0,
+            t_end,
+            opts,
+            keep_steps,
+            grid,
+            dist,
+            runs,
+            log_cap,
+            arc_cap,
+            out,
+            parallel,
+            lanes,
         )
         full = (out.log_n[runs] > log_cap) | (out.arc_n[runs] > arc_cap)
         for slot in np.flatnonzero(~full):
@@ -380,6 +427,39 @@ class _Buffers:
         self.grid_j = np.full((B, kept), -1, dtype=np.int64)
         self.grid_max = np.full(B, -np.inf if n_grid else np.nan)
         self.error_code = np.zeros(B, dtype=np.int64)
+        self.lanes: LaneStats | None = None
+
+    def count_lanes(self, counts: np.ndarray, width: int, vector: bool) -> None:
+        """Add one kernel call's lane-steps ``(all, idle, rejected, events)``."""
+        old = self.lanes or LaneStats(width, vector, 0, 0, 0, 0)
+        slots, idle, rejected, events = (int(c) for c in counts)
+        self.lanes = LaneStats(
+            max(old.width, width),
+            old.vector or vector,
+            old.slots + slots,
+            old.idle + idle,
+            old.rejected + rejected,
+            old.events + events,
+        )
+
+    def outputs(self) -> Any:
+        """The kernel's view of them (:class:`etobs.hybrid._kernel.Outputs`)."""
+        from etobs.hybrid._kernel import Outputs
+
+        return Outputs(
+            self.status,
+            self.t_final,
+            self.j_final,
+            self.x_final,
+            self.n_steps,
+            self.n_rejected,
+            self.log_n,
+            self.arc_n,
+            self.grid_x,
+            self.grid_j,
+            self.grid_max,
+            self.error_code,
+        )
 
 
 def _call(
@@ -397,7 +477,10 @@ def _call(
     arc_cap: int,
     out: _Buffers,
     parallel: bool,
+    lanes: int | None = None,
 ) -> tuple[np.ndarray, ...]:
+
+    from etobs.hybrid._kernel import Logs, Options, Problem, System
 
     n = x.shape[1]
     fopt = np.array(
@@ -413,75 +496,58 @@ def _call(
             system.n_work + 1,
             system.n if system.n_flow is None else system.n_flow,
             _NEVER if opts.zeno_jumps is None else opts.zeno_jumps,
+            system.n_rules,
         ],
         dtype=np.int64,
     )
     R = runs.shape[0]  # buffer row r belongs to run runs[r]
-    log_rule = np.zeros((R, log_cap), dtype=np.int64)
-    log_t = np.zeros((R, log_cap))
-    log_j = np.zeros((R, log_cap), dtype=np.int64)
-    log_x = np.zeros((R, log_cap, len(system.log_columns)))
-    arc_t = np.zeros((R, arc_cap))
-    arc_j = np.zeros((R, arc_cap), dtype=np.int64)
-    arc_x = np.zeros((R, arc_cap, n))
+    logs = Logs(
+        np.zeros((R, log_cap), dtype=np.int64),
+        np.zeros((R, log_cap)),
+        np.zeros((R, log_cap), dtype=np.int64),
+        np.zeros((R, log_cap, len(system.log_columns))),
+        np.zeros((R, arc_cap)),
+        np.zeros((R, arc_cap), dtype=np.int64),
+        np.zeros((R, arc_cap, n)),
+    )
     kernel = _built(opts.method)
-    call = partial(
-        kernel,
-        (np.array(system.addresses, dtype=np.int64), system.ia, system.cf),
-        x,
-        P,
-        system.n_rules,
-        float(t0),
-        float(t_end),
-        fopt,
-        iopt,
-        grid,
-        log_cap,
-        arc_cap,
-        np.array(system.log_columns, dtype=np.int64),
+    problem = Problem(
+        x, P, np.array([t0, t_end], dtype=float), grid, dist, np.array(system.log_columns, dtype=np.int64)
     )
-    rest = (
-        out.status,
-        out.t_final,
-        out.j_final,
-        out.x_final,
-        out.n_steps,
-        out.n_rejected,
-        out.log_n,
-        log_rule,
-        log_t,
-        log_j,
-        out.grid_x,
-        out.grid_j,
-        dist,
-        out.grid_max,
-        out.arc_n,
-        arc_t,
-        arc_j,
-        arc_x,
-        out.error_code,
-        log_x,
-    )
+    options = Options(fopt, iopt)
+    outputs = out.outputs()
     threads = _threads() if parallel else 1
-    # Each thread solves a contiguous slice of ``runs``; the kernel releases the GIL.
-    # Buffer rows are per slice, so every slice gets its own views.
+    # Each thread solves a contiguous slice of ``runs``, W of them at a time; the kernel
+    # releases the GIL. Log rows are per slice, so every slice gets its own views.
     cuts = np.linspace(0, R, min(threads, R) + 1).astype(int) if R else np.zeros(1, int)
     jobs = []
     for a, b in itertools.pairwise(cuts):
-        views = (
-            rest[:7]
-            + tuple(buf[a:b] for buf in rest[7:10])
-            + rest[10:15]  # grid_x, grid_j, dist, grid_max, arc_n
-            + tuple(buf[a:b] for buf in rest[15:18])
-            + (rest[18], rest[19][a:b])  # error_code, log_x
-        )
-        jobs.append((np.ascontiguousarray(runs[a:b], dtype=np.int64), views))
+        part = Logs(*(buf[a:b] for buf in logs))
+        W = lanes_for(b - a, lanes)
+        # the system's lane form computes lane_width lanes: with fewer, the one-run form lane by lane
+        wide = system.lane_form is not None and W == system.lane_width
+        functions = [*system.addresses, system.lane_form() if wide else 0]  # type: ignore[misc]
+        job_system = System(np.array(functions, dtype=np.int64), system.ia, system.cf)
+        jobs.append((job_system, np.ascontiguousarray(runs[a:b], dtype=np.int64), part, W))
+    counts = np.zeros((len(jobs), 4), dtype=np.int64)
+
+    def call(k: int) -> None:
+        job_system, job_runs, part, W = jobs[k]
+        kernel(job_system, problem, options, outputs, part, job_runs, W, counts[k])
+
     if len(jobs) == 1:
-        call(jobs[0][0], *jobs[0][1])
+        call(0)
     else:
         with ThreadPoolExecutor(len(jobs)) as pool:
-            list(pool.map(lambda job: call(job[0], *job[1]), jobs))
-    return log_rule, log_t, log_j, log_x, arc_t, arc_j, arc_x
+            list(pool.map(call, range(len(jobs))))
+    widths = [job[3] for job in jobs]
+    out.count_lanes(counts.sum(axis=0), max(widths, default=1), any(job[0].addresses[3] for job in jobs))
+    return tuple(logs)
+
+
+def lanes_for(runs: int, lanes: int | None) -> int:
+    """Lanes of a thread that solves ``runs`` runs: ``lanes``, or :data:`LANES`, at most ``runs``."""
+    return max(1, min(LANES if lanes is None else lanes, runs))
 
 
 _BUILT: dict[str, Any] = {}

@@ -317,6 +317,48 @@ class GridMax:
         return f"GridMax: {self.value.shape[0]} runs, maximum over {self.t.shape[0]} points{_span(self.t)}"
 
 
+@dataclass(frozen=True)
+class LaneStats:
+    """How the engine's lanes were used in a solve (``HybridSolution.lanes``).
+
+    Each thread advances ``width`` runs side by side; a *lane-step* is one lane during one
+    step of its thread.
+
+    Attributes
+    ----------
+    width : int
+        Lanes per thread (at most :data:`etobs.hybrid.compiled.LANES`).
+    vector : bool
+        Whether the system's lane form ran (else its one-run form, lane by lane).
+    slots : int
+        Lane-steps, over all threads.
+    idle : int
+        Lane-steps of lanes that held no run (the queue was empty: the batch's tail).
+    rejected : int
+        Lane-steps whose step was rejected.
+    events : int
+        Lane-steps whose step was examined lane by lane for an event (an event function
+        sampled at or above zero, a peak probe, or a failure).
+
+    """
+
+    width: int
+    vector: bool
+    slots: int
+    idle: int
+    rejected: int
+    events: int
+
+    def share(self, what: str) -> float:
+        """``idle``, ``rejected`` or ``events`` as a fraction of :attr:`slots`."""
+        return float(getattr(self, what)) / self.slots if self.slots else 0.0
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"{k} {self.share(k):.1%}" for k in ("idle", "rejected", "events"))
+        form = "lane form" if self.vector else "one-run form lane by lane"
+        return f"LaneStats: {self.width} lanes ({form}), {self.slots} lane-steps: {parts}"
+
+
 def _span(t: np.ndarray) -> str:
     """`` on t in [a, b]`` for a non-empty time array, else nothing (for reprs)."""
     return f" on t in [{t[0]:.6g}, {t[-1]:.6g}]" if t.size else ""
@@ -360,6 +402,8 @@ class HybridSolution:
         ``model_error``), else ``""``.
     grid_max : GridMax or None
         With ``SaveAt(max_distance=...)``.
+    lanes : LaneStats or None
+        How the engine's lanes were used (``backend == "engine"``).
 
     """
 
@@ -377,6 +421,7 @@ class HybridSolution:
     backend: str
     failures: tuple[str, ...] = ()
     grid_max: GridMax | None = None
+    lanes: LaneStats | None = None
 
     @property
     def n_runs(self) -> int:
