@@ -33,6 +33,7 @@ test: lint
 	$(BIN)/python benchmarks/bench_model_cost.py --quick
 	$(BIN)/python benchmarks/bench_tune.py --quick
 	$(BIN)/python benchmarks/bench_vecmath.py --quick
+	$(BIN)/python benchmarks/bench_lanes.py --quick
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
@@ -48,6 +49,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/bench_model_cost.py
 	$(BIN)/python benchmarks/bench_tune.py
 	$(BIN)/python benchmarks/bench_vecmath.py
+	$(BIN)/python benchmarks/bench_lanes.py --base 752f71e
 
 clean:
 	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis

@@ -238,15 +238,10 @@ def table1(rev: str | None) -> None:
 
 
 def _solver_seconds(out: Path) -> float:
-    """The solver's seconds over all runs of a sweep folder (each run's share of its chunk)."""
-    import pandas as pd
-
-    files = list(out.rglob("*.parquet")) + list(out.rglob("runs.csv"))
+    """The solver's seconds over all runs of a sweep folder (each record: its share of its chunk's solve)."""
     total = 0.0
-    for f in files:
-        frame = pd.read_parquet(f) if f.suffix == ".parquet" else pd.read_csv(f)
-        if "seconds" in frame:
-            total += float(frame["seconds"].sum())
+    for f in (out / "chunks").glob("*.json"):
+        total += sum(float(r.get("seconds", 0.0)) for r in json.loads(f.read_text())["records"])
     return total
 
 

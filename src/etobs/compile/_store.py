@@ -25,9 +25,18 @@ def store(r: Any, out: Any, n: int) -> int:
     raise NotImplementedError("compiled only")  # pragma: no cover
 
 
-#: Results up to this length are copied by code written out element by element: a loop
-#: whose length the compiler learns only where the call is inlined stays a loop, which
-#: keeps a loop over lanes around it from becoming vector instructions.
+def store_inlined(r: Any, out: Any, n: int) -> int:
+    """:func:`store`, inlined by numba where it is called.
+
+    Where ``n`` is then a constant LLVM unrolls the copy: the lane form's loop over lanes
+    around it stays vector code.
+    """
+    raise NotImplementedError("compiled only")  # pragma: no cover
+
+
+#: Tuples up to this length are copied by code written out element by element: a loop
+#: over a tuple indexes it by a run-time number (a switch), which keeps a loop over lanes
+#: around it from becoming vector instructions.
 WRITTEN_OUT = 64
 
 
@@ -42,13 +51,9 @@ def _written_out(check: str, count: int) -> Any:
     return namespace["impl"]
 
 
-@overload(store, prefer_literal=True, inline="always")
 def _store(r, out, n):  # type: ignore[no-untyped-def]  # numba: the implementations' signature must be the typer's
-    count = n.literal_value if isinstance(n, types.IntegerLiteral) else -1
     if isinstance(r, types.Array) and not isinstance(r.dtype, types.Complex):
-        if 0 <= count <= WRITTEN_OUT:
-            return _written_out("r.shape[0] != n", count)
-
+        # inlined where n is a constant: LLVM unrolls the loop there
         def from_array(r, out, n):  # type: ignore[no-untyped-def]
             if r.shape[0] != n:
                 return 2
@@ -94,3 +99,8 @@ def readonly(typingctx: Any, arr: Any):  # type: ignore[no-untyped-def]
         return impl_ret_borrowed(context, builder, signature.return_type, args[0])
 
     return sig, codegen
+
+
+# one implementation, two ways to compile it: called (a quick compile), or inlined
+overload(store, jit_options={"forceinline": True})(_store)
+overload(store_inlined, inline="always")(_store)

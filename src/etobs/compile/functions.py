@@ -230,7 +230,7 @@ def compile_module(
     import numpy as np
 
     from etobs.compile._stack import stack_f8, stack_i8
-    from etobs.compile._store import readonly, store
+    from etobs.compile._store import readonly, store, store_inlined
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
     parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
@@ -246,7 +246,7 @@ def compile_module(
             "__name__": "etobs.compile._generated",
             "carray": numba.carray,
             "readonly": readonly,
-            "store": store,
+            "store": store_inlined if inline else store,
             "np": np,
             "jit": numba.njit(error_model="numpy"),
             "inline": numba.njit(inline="always", error_model="numpy"),
@@ -394,7 +394,7 @@ def _jitted(fn: Any, memo: dict[int, Any], cached: bool = False, inline: bool = 
     if id(fn) in memo:
         return memo[id(fn)]
 
-    swap = vecmath.replacements()
+    swap = vecmath.replacements(inline)
 
     def convert(value: Any) -> Any:
         if id(value) in swap:  # libm's sin and cos: the engine's, which vectorize

@@ -101,12 +101,13 @@ def cos(x: float) -> float:
 
 
 @functools.cache
-def jitted() -> dict[str, object]:
-    """``sin`` and ``cos`` compiled by numba, inlined where they are called (``inline="always"``).
+def jitted(inline: bool = True) -> dict[str, object]:
+    """``sin`` and ``cos`` compiled by numba, as numba dispatchers other numba code may call.
 
-    Each function of this module is compiled in a namespace where the helpers it calls
-    are compiled too; the result maps ``"sin"`` and ``"cos"`` to numba dispatchers that
-    other numba code (the generated model) may call.
+    With ``inline`` numba inlines them where they are called (``inline="always"``: a loop
+    over lanes around them becomes vector code), else LLVM does once the code is linked (a
+    faster compile, the same arithmetic). Each function of this module is compiled in a
+    namespace where the helpers it calls are compiled too (inlined into it).
     """
     import types
 
@@ -115,33 +116,34 @@ def jitted() -> dict[str, object]:
     namespace = dict(globals())
     for name in ("_round", "_reduce", "_sin_poly", "_cos_poly", "_quadrant", "sin", "cos"):
         fn = globals()[name]
-        namespace[name] = numba.njit(inline="always")(types.FunctionType(fn.__code__, namespace, name))
+        how: dict[str, Any] = {"inline": "always"}
+        if name in ("sin", "cos") and not inline:
+            how = {"forceinline": True}
+        namespace[name] = numba.njit(**how)(types.FunctionType(fn.__code__, namespace, name))
     return {"sin": namespace["sin"], "cos": namespace["cos"]}
 
 
-def _sin_any(x: object) -> object:
-    """``np.sin`` as the engine compiles it: :func:`sin` on floats and on arrays, element by element."""
-    import numpy as np
+def _generic(name: str, inline: bool) -> Any:
+    """A function numba compiles by the overload :func:`replacements` registers (``np.sin`` in Python)."""
 
-    return np.sin(x)
+    def generic(x: object) -> object:
+        import numpy as np
 
+        return getattr(np, name)(x)
 
-def _cos_any(x: object) -> object:
-    """``np.cos`` as the engine compiles it (see :func:`_sin_any`)."""
-    import numpy as np
-
-    return np.cos(x)
+    generic.__name__ = generic.__qualname__ = f"{name}_{'inline' if inline else 'call'}"
+    return generic
 
 
 @functools.cache
-def replacements() -> dict[int, object]:
+def replacements(inline: bool = True) -> dict[int, object]:
     """What the engine compiles in a user's function in place of libm's ``sin`` and ``cos``.
 
     By ``id`` of what a function's global names may refer to: the modules ``numpy`` and
     ``math`` become modules that forward every attribute but ``sin`` and ``cos``, and
     ``np.sin``, ``np.cos``, ``math.sin``, ``math.cos`` (imported by name) the functions of
-    this module, for floats and for arrays (element by element). Anything else (complex
-    numbers) is left to numba's ``np.sin``.
+    this module, for floats and for arrays (element by element), inlined by numba or not
+    (:func:`jitted`). Anything else (complex numbers) is left to numba's ``np.sin``.
     """
     import types as pytypes
 
@@ -149,7 +151,7 @@ def replacements() -> dict[int, object]:
     from numba.core import types
     from numba.extending import overload
 
-    fns = jitted()
+    fns = jitted(inline)
 
     def typer(scalar: Any, libm: Any) -> Any:
         # no annotations: numba requires the implementations' signature to be the typer's
@@ -169,10 +171,11 @@ def replacements() -> dict[int, object]:
 
         return typed
 
-    overload(_sin_any, inline="always")(typer(fns["sin"], np.sin))
-    overload(_cos_any, inline="always")(typer(fns["cos"], np.cos))
-    # numba compiles a call of _sin_any by its overload above; Python never calls it there
-    sin_any, cos_any = _sin_any, _cos_any
+    how: dict[str, Any] = {"inline": "always"} if inline else {"jit_options": {"forceinline": True}}
+    # numba compiles a call of these by their overloads; Python never calls them there
+    sin_any, cos_any = _generic("sin", inline), _generic("cos", inline)
+    overload(sin_any, **how)(typer(fns["sin"], np.sin))
+    overload(cos_any, **how)(typer(fns["cos"], np.cos))
     out: dict[int, object] = {
         id(np.sin): sin_any,
         id(np.cos): cos_any,

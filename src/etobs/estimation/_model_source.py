@@ -66,7 +66,7 @@ def _helpers() -> dict[str, Callable[..., Any]]:
     from etobs.compile import vecmath
 
     out: dict[str, Callable[..., Any]] = {f"K_{k.name.upper()}": k.value for k in fm.K_KINDS.values()}
-    out["SIN"] = vecmath.jitted()["sin"]  # vectorizes in the lane form (a libm call does not)
+    out["SIN"] = vecmath.sin  # vectorizes in the lane form (a libm call does not)
     for kind in fm.RULE_KINDS.values():
         for what in ("trigger", "flow", "reset"):
             formula = getattr(kind, what)

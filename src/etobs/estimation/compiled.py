@@ -89,12 +89,10 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     src = ms.model_source(problem, forms)  # type: ignore[arg-type] - engine_support checked them
     functions = {**src.users, **src.helpers}
     one, why = None, ""
-    for inline in (True, False):  # numba inlines your functions; else LLVM does
-        try:
-            one = compile_module(src.text, functions, ("est",), "estimation model", inline=inline)[0]
-            break
-        except ModelError as exc:
-            why = why or str(exc)
+    try:  # LLVM inlines your functions (each compiled and cached on its own): the fastest compile
+        one = compile_module(src.text, functions, ("est",), "estimation model", inline=True)[0]
+    except ModelError as exc:
+        why = str(exc)
     if one is None:
         # name the user function at fault: each compiled on its own raises a ModelError naming it
         for glob, fn in src.users.items():

@@ -1,10 +1,11 @@
-"""The compiled solver kernel (numba): one run per thread (the contract of :mod:`etobs.hybrid.solver`).
+"""The compiled solver kernel (numba): many runs per thread, in lanes (see :mod:`etobs.hybrid.solver`).
 
 This module imports numba at the top; :mod:`etobs.hybrid.compiled` imports it only
 when the compiled backend is asked for, so numba stays optional.
 
-The algorithm is the one of :mod:`etobs.hybrid.solver` (see its contract), written
-for one run at a time so that no work is done for runs that do not need it:
+The algorithm is the one of :mod:`etobs.hybrid.solver` (see its contract), for each
+run on its own (its own steps and events), with runs side by side in lanes
+(``_kernel`` in ``_kernel_body.py``; docs/solver.md, "Lanes"):
 
 * steps of an embedded Runge--Kutta pair with the same step-size controller;
 * on every accepted step, the event functions sampled on the dense output at

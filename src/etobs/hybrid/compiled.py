@@ -1,4 +1,4 @@
-"""The engine: the solver's algorithm compiled with numba, one run per thread.
+"""The engine: the solver's algorithm compiled with numba, many runs per thread in lanes.
 
 It solves a :class:`CompiledSystem`: a hybrid system whose flow, guard and jump are C
 functions called by address (see :mod:`etobs.hybrid._kernel` for their contract), so
@@ -19,7 +19,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any, SupportsInt
+from typing import Any, SupportsInt, cast
 
 import numpy as np
 
@@ -522,7 +522,7 @@ def _call(
     cuts = np.linspace(0, R, min(threads, R) + 1).astype(int) if R else np.zeros(1, int)
     jobs = []
     for a, b in itertools.pairwise(cuts):
-        part = Logs(*(buf[a:b] for buf in logs))
+        part = Logs(*(cast(Any, buf)[a:b] for buf in logs))  # each buffer's rows of this slice
         W = lanes_for(b - a, lanes)
         # the system's lane form computes lane_width lanes: with fewer, the one-run form lane by lane
         wide = system.lane_form is not None and W == system.lane_width
