@@ -148,3 +148,22 @@ def test_a_run_gives_the_same_numbers_in_any_lane_batch_and_chunk(arm_batch, mon
     _same(base, _arm(problem, x0[::-1], save), rows=np.arange(39, -1, -1))  # other lanes, other neighbours
     _same(base, _arm(problem, x0[7:30], save), rows=np.arange(7, 30))  # a chunk
     _same(base, _arm(problem, x0[11:12], save), rows=np.array([11]))  # alone
+
+
+def test_a_flow_that_leaves_its_constant_entries_unwritten_runs_in_one_lane():
+    # guards against: the one-run path copying the flow's unwritten entries (n_flow on) from a
+    # scratch that held the guard's values (more event functions than flowing entries): the
+    # run ended with model_error ("nonzero derivative for an entry from n_flow on")
+    from etobs import EstimationProblem, Node, Observer, Plant
+    from etobs.model import Linear as Lin
+    from etobs.model import Link, Network, StaticRule
+
+    plant = Plant(f_p=lambda t, x, u, v: (-x[0],), h=lambda x: (x[0], 2.0 * x[0], 3.0 * x[0]), n_x=1, n_y=3)
+    observer = Observer(f_o=lambda t, z, u, ybar, yhat: (ybar[0] - z[0],), n_z=1)
+    nodes = [Node((i,), StaticRule(gamma=Lin(1.0), eps=0.05)) for i in range(3)]
+    pb = EstimationProblem(plant, observer, nodes=nodes, network=Network(Link(delay=0.01), seed=1))
+    assert pb.layout.n_flow < len(pb.rule_names)  # more event functions than flowing entries
+    eng = simulate(pb, [1.0], 2.0, save=SaveAt(steps=False), progress=False)
+    ref = simulate(pb, [1.0], 2.0, save=SaveAt(steps=False), backend="scipy")
+    assert eng.backend == "engine" and eng.solution.status.tolist() == [Status.COMPLETED]
+    assert eng.solution.jumps.rule.tolist() == ref.solution.jumps.rule.tolist()

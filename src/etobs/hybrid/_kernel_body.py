@@ -356,7 +356,7 @@ def _kernel(system, problem, options, out, logs, runs, W, stats):
                 for lane in range(W):
                     Yi[q, lane] = X[q, lane] + HH[lane] * DY[q, lane]
             _lanes_call(
-                fns, FLOW, K_FLOW, W, n, n, a_t, a_yi, kb + 8 * n * W * i, a_pr, PR, GO, FAIL, IA, yo, oo
+                fns, FLOW, K_FLOW, W, n, nf, a_t, a_yi, kb + 8 * n * W * i, a_pr, PR, GO, FAIL, IA, yo, oo
             )
         # error norm: the scaled RMS norm of the embedded estimate h sum_k e_k K_k (Hairer et
         # al. II.4 (4.11)); DOP853 corrects its 5th-order estimate by the 3rd-order one,
@@ -968,6 +968,8 @@ def _lanes_call(fns, slot, k, W, n, rows, a_t, a_x, a_out, a_p, PR, mask, FAIL, 
     last, ``W`` lanes). With the system's lane form, one call; else (or when the lane form
     raised: numba printed it) the one-run function lane by lane, on the lanes of ``mask``.
     Failures of the lanes of ``mask`` are recorded in ``FAIL`` as one-run calls record them.
+    ``rows`` results are copied out: for the flow its first ``n_flow`` (a flow leaves the
+    others unwritten, and the scratch ``o1`` may hold the guard's values there).
     """
     lane_fn = fns[3]
     if lane_fn != 0:
@@ -1024,7 +1026,7 @@ def _dense_lanes(
         for lane in range(W):
             T[lane] = TT[lane] + TDC[r] * HH[lane]
         _lanes_call(
-            fns, FLOW, K_FLOW, W, n, n, a_t, a_y, kb + 8 * n * W * mm, a_pr, PR, mask, FAIL, IA, yo, oo
+            fns, FLOW, K_FLOW, W, n, nf, a_t, a_y, kb + 8 * n * W * mm, a_pr, PR, mask, FAIL, IA, yo, oo
         )
     for q in range(nf):
         for lane in range(W):
