@@ -49,6 +49,13 @@ def gamma(s):
     return s * s * (1.0 + s)
 
 
+def _nodes() -> list[Node]:
+    """A vector node sending both angles (a ``Custom`` gamma) and a scalar node sending one velocity."""
+    custom = DynamicRule(gamma=Custom(gamma), alpha=Linear(1.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
+    plain = DynamicRule(gamma=Quadratic(2.0), alpha=Linear(2.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
+    return [Node((0, 1), custom, name="angles"), Node((2,), plain, name="velocity")]
+
+
 @factory  # a spec may name it: system.factory = "path/to/user_model.py:problem"
 def problem(damping: float = 0.3) -> EstimationProblem:
     """The estimation problem; ``damping`` travels in ``params`` (no recompile)."""
@@ -62,14 +69,7 @@ def problem(damping: float = 0.3) -> EstimationProblem:
     )
     L = np.array([[2.0, 0.0, 0.0], [1.0, 0.5, 0.0], [0.0, 2.0, 1.0], [0.0, 1.0, 2.0]])
     obs = luenberger(lambda t, x, u: model(t, x, u, np.array([0.3, K])), L)
-    custom = DynamicRule(gamma=Custom(gamma), alpha=Linear(1.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
-    plain = DynamicRule(gamma=Quadratic(2.0), alpha=Linear(2.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
-    return EstimationProblem(
-        plant,
-        obs,
-        nodes=[Node((0, 1), custom, name="angles"), Node((2,), plain, name="velocity")],
-        u=FunctionSignal(drive, 1),
-    )
+    return EstimationProblem(plant, obs, nodes=_nodes(), u=FunctionSignal(drive, 1))
 
 
 # ---- the same model written for the engine's lanes: tuples, no arrays made per call ------
@@ -119,11 +119,4 @@ def tuple_problem(damping: float = 0.3) -> EstimationProblem:
         params=[damping, K],
     )
     obs = Observer(f_o=tuple_observer, n_z=4)
-    custom = DynamicRule(gamma=Custom(gamma), alpha=Linear(1.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
-    plain = DynamicRule(gamma=Quadratic(2.0), alpha=Linear(2.0), sigma=5.0, c=0.05, eps=1e-3, eta0=0.1)
-    return EstimationProblem(
-        plant,
-        obs,
-        nodes=[Node((0, 1), custom, name="angles"), Node((2,), plain, name="velocity")],
-        u=FunctionSignal(tuple_drive, 1),
-    )
+    return EstimationProblem(plant, obs, nodes=_nodes(), u=FunctionSignal(tuple_drive, 1))

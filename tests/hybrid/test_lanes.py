@@ -167,3 +167,14 @@ def test_a_flow_that_leaves_its_constant_entries_unwritten_runs_in_one_lane():
     ref = simulate(pb, [1.0], 2.0, save=SaveAt(steps=False), backend="scipy")
     assert eng.backend == "engine" and eng.solution.status.tolist() == [Status.COMPLETED]
     assert eng.solution.jumps.rule.tolist() == ref.solution.jumps.rule.tolist()
+
+
+@pytest.mark.parametrize(
+    ("lanes", "match"), [(0, r"`lanes` must be an integer >= 1; got 0"), (2.5, r"`lanes`")]
+)
+def test_a_bad_lane_count_is_named(lanes, match):
+    from etobs.errors import InputError, InputTypeError
+
+    system, modes, x0 = _modes()
+    with pytest.raises((InputError, InputTypeError), match=match):
+        solve_compiled(system.compiled(), x0[:1], (0.0, 1.0), params=modes[:1], lanes=lanes)

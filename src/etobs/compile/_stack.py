@@ -19,29 +19,24 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 
-@intrinsic
-def stack_f8(typingctx: Any, size: Any):  # type: ignore[no-untyped-def]
-    """A pointer to ``size`` float64 on the stack (``size`` a constant), for ``numba.carray``."""
-    if not isinstance(size, types.IntegerLiteral):
-        return None
-    count = int(size.literal_value)
-    sig = types.CPointer(types.float64)(size)  # type: ignore[no-untyped-call]  # untyped in numba's stubs
+def _stack(numba_type: Any, llvm_type: Any) -> Any:
+    """An intrinsic ``stack(size)``: a pointer to ``size`` values on the stack (``size`` a constant)."""
 
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return cgutils.alloca_once(builder, ir.DoubleType(), size=max(count, 1))
+    def stack(typingctx: Any, size: Any):  # type: ignore[no-untyped-def]
+        if not isinstance(size, types.IntegerLiteral):
+            return None
+        count = int(size.literal_value)
+        sig = types.CPointer(numba_type)(size)  # type: ignore[no-untyped-call]  # untyped in numba's stubs
 
-    return sig, codegen
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            return cgutils.alloca_once(builder, llvm_type, size=max(count, 1))
+
+        return sig, codegen
+
+    return intrinsic(stack)
 
 
-@intrinsic
-def stack_i8(typingctx: Any, size: Any):  # type: ignore[no-untyped-def]
-    """A pointer to ``size`` int64 on the stack (``size`` a constant), for ``numba.carray``."""
-    if not isinstance(size, types.IntegerLiteral):
-        return None
-    count = int(size.literal_value)
-    sig = types.CPointer(types.int64)(size)  # type: ignore[no-untyped-call]  # untyped in numba's stubs
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return cgutils.alloca_once(builder, ir.IntType(64), size=max(count, 1))
-
-    return sig, codegen
+#: ``stack_f8(size)``: float64 on the stack, for ``numba.carray``.
+stack_f8 = _stack(types.float64, ir.DoubleType())
+#: ``stack_i8(size)``: int64 on the stack, for ``numba.carray``.
+stack_i8 = _stack(types.int64, ir.IntType(64))
