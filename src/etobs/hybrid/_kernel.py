@@ -20,7 +20,7 @@ The system's flow, guard and jump are C functions called by address (see
 three addresses, and integer and float data shared by all runs that the functions
 receive as ``ia`` and ``a1``. Each call gets the run's parameter vector ``p`` (a row
 of ``P``) and, as ``a2``, the run's scratch array of ``n_work`` floats. Inside a run
-these travel as plain addresses (:func:`run_args`), and rows of the stage and sample
+these travel as plain addresses (``_lane_args`` of the template), and rows of the stage and sample
 arrays as addresses too: an array taken from a tuple, or a view of a row, costs two
 atomic reference-count updates, which were 40 % of a run's time. So the kernel
 does not depend on the system: it is compiled once per machine and method, and cached.
@@ -155,7 +155,7 @@ class Logs(NamedTuple):
 
 #: What the system's functions read and write: a float64 array, or its address (an int).
 Pointer: TypeAlias = "NDArray[np.float64] | int"
-#: A run's addresses (:func:`run_args`): flow, guard, jump, ``ia``, ``cf``, scratch, failure flag.
+#: A run's addresses (``_lane_args``): flow, guard, jump, ``ia``, ``cf``, scratch, failure flag.
 RunArgs: TypeAlias = tuple[int, int, int, int, int, int, int]
 
 # The intrinsics of etobs.compile.ccall, typed as compiled code calls them: numba's stubs
@@ -174,7 +174,7 @@ store_i64 = cast("Callable[[int, int], None]", _ccall.store_i64)
 def _system(slot: int, k: int, t: float, x: Pointer, p: Pointer, args: RunArgs, out: Pointer) -> None:
     """Call the system's function ``slot`` (FLOW, GUARD, JUMP) by address into ``out``.
 
-    ``args`` is the run's tuple of addresses (:func:`run_args`); ``x``, ``p`` and ``out``
+    ``args`` is the run's tuple of addresses (:data:`RunArgs`); ``x``, ``p`` and ``out``
     are arrays or addresses. On failure, record the run's first failure (``16 * slot +
     st`` unless ``st`` is already a code); ``out`` may be left partly written, so the
     kernel does not take the step and ends the run at its last good state.
@@ -182,23 +182,6 @@ def _system(slot: int, k: int, t: float, x: Pointer, p: Pointer, args: RunArgs, 
     st = ccall(args[slot - 1], k, t, x, args[4], args[5], args[4], args[3], p, out)
     if st != 1 and load_i64(args[6]) == 0:
         store_i64(args[6], st if st >= 16 else 16 * slot + st)
-
-
-@numba.njit(inline="always", error_model="numpy")
-def run_args(
-    shared: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]],
-    work: NDArray[np.float64],
-    failure: NDArray[np.int64],
-) -> RunArgs:
-    """The run's addresses: flow, guard, jump, ``ia``, ``cf``, its scratch and its failure flag.
-
-    Plain integers, so that passing them around costs no reference counting (a tuple
-    of arrays is counted at every access). ``shared = (addresses, ia, cf)``; ``work``
-    and ``failure`` are the run's arrays, which the caller keeps alive.
-    """
-    a = shared[0]
-    failure[0] = 0
-    return (a[0], a[1], a[2], address(shared[1]), address(shared[2]), address(work), address(failure))
 
 
 def _f8ptr_typing(typingctx: Any, addr: Any) -> tuple[Any, Callable[..., Any]]:

@@ -934,7 +934,7 @@ def _ctx(args, p, g, f, t_end, m, iopt, log_cap, arc_cap, slot, buffers, fopt, z
 
 @jit_inline
 def _lane_args(fns, lane):
-    """The run addresses (:func:`etobs.hybrid._kernel.run_args`) of lane ``lane``'s one-run calls."""
+    """The run addresses (:data:`etobs.hybrid._kernel.RunArgs`) of lane ``lane``'s one-run calls."""
     return (fns[0], fns[1], fns[2], fns[4], fns[5], fns[8], fns[9] + 8 * lane)
 
 
