@@ -167,7 +167,7 @@ def vector_code(kernel: bool) -> None:
         from etobs.estimation.compiled import _LANE_FORMS
         cp = compile_problem(robot_arm())
         cp.system.lane_form()
-        ir = _LANE_FORMS[int(cp.system.keep[0].address)][1].cfunc.inspect_llvm()
+        ir = _LANE_FORMS[(int(cp.system.keep[0].address), True)][1].cfunc.inspect_llvm()
         out = {{"model": re.findall(r"<(\\d+) x double>", ir)}}
         if {kernel}:
             import numpy as np

@@ -13,7 +13,16 @@ import warnings
 import numpy as np
 import pytest
 
-from etobs import EstimationProblem, Node, Observer, PerformanceWarning, Plant, SaveAt, simulate
+from etobs import (
+    EstimationProblem,
+    Node,
+    Observer,
+    PerformanceWarning,
+    Plant,
+    SaveAt,
+    SolverOptions,
+    simulate,
+)
 from etobs.estimation import _lane_probe as lp
 from etobs.estimation._model_source import LANE_WIDTH
 from etobs.estimation.compiled import _LANE_FORMS, _probe_states, compile_problem
@@ -24,10 +33,11 @@ from etobs.model import DynamicRule, Linear, Quadratic
 from .test_engine_agrees import STRUCTURES
 
 
-def _forms(cp):
-    """The compiled one-run and lane forms of a compiled problem."""
+def _forms(cp, shared=True):
+    """The compiled one-run form of a compiled problem and its lane form ``shared`` (compiled here)."""
     one = cp.system.keep[0]
-    return one, _LANE_FORMS[int(one.address)][1]
+    assert cp.system.lane_form(shared) != 0
+    return one, _LANE_FORMS[(int(one.address), shared)][1]
 
 
 DRAW = {"eps": 0.01, "sigma": 1.0, "delta": 0.05, "period": 0.05, "delay": 0.01, "loss": 0.3, "seed": 7}
@@ -44,11 +54,12 @@ def test_every_lane_of_the_lane_form_computes_what_one_run_computes(name, proble
     from etobs.hybrid import compiled as comp
 
     cp = compile_problem(problem)
-    assert cp.system.lane_form() != 0 and cp.system.lane_width == LANE_WIDTH
-    one, lanes = _forms(cp)
+    assert cp.system.lane_width == LANE_WIDTH
     states = _probe_states(problem, LANE_WIDTH)
-    probe = lp.LaneProbe(one, lanes, states, cp.system.n_work + 1, cp.system.n_rules, cp.params)
-    assert probe.agrees()
+    for shared in (True, False):  # lanes of one problem, and lanes of a row each
+        one, lanes = _forms(cp, shared)
+        probe = lp.LaneProbe(one, lanes, states, cp.system.n_work + 1, cp.system.n_rules, cp.params)
+        assert probe.agrees(), shared
     # and in a solve: 40 runs (20 a thread, in 16 lanes refilled) against one lane, bit for bit
     x0 = np.random.default_rng(5).uniform(-1.0, 1.0, (40, problem.plant.n_x))
     kw = {"save": SaveAt(steps=False), "progress": False}
@@ -110,11 +121,10 @@ def test_the_robot_arm_is_vector_code_with_no_note():
         """
         import json, re
         from etobs.examples import robot_arm
-        from etobs.estimation.compiled import _LANE_FORMS, _probe_states, compile_problem
-        from etobs.estimation.compiled import _LANE_FORMS
+        from etobs.estimation.compiled import _LANE_FORMS, compile_problem
         cp = compile_problem(robot_arm())
-        cp.system.lane_form()
-        ir = _LANE_FORMS[int(cp.system.keep[0].address)][1].cfunc.inspect_llvm()
+        cp.system.lane_form(True)
+        ir = _LANE_FORMS[(int(cp.system.keep[0].address), True)][1].cfunc.inspect_llvm()
         print(json.dumps(sorted(set(re.findall(r"<(\\d+) x double>", ir)))))
         """
     )
@@ -123,3 +133,38 @@ def test_the_robot_arm_is_vector_code_with_no_note():
     assert out.returncode == 0, out.stderr[-2000:]
     widths = json.loads(out.stdout.strip().splitlines()[-1])
     assert widths and all(int(w) >= 2 for w in widths)
+
+
+def test_runs_with_their_own_parameters_share_lanes_and_get_their_own_numbers():
+    # two problems of one structure: one compiled model, the numbers in each run's row of p
+    from dataclasses import replace
+
+    from etobs.hybrid.compiled import solve_compiled
+
+    low, high = robot_arm(sigma=(600.0, 800.0), eps=10.0), robot_arm(sigma=(300.0, 400.0), eps=1.0)
+    cp, cp_high = compile_problem(low), compile_problem(high)
+    assert cp.system.keep[0] is cp_high.system.keep[0] and not np.array_equal(cp.params, cp_high.params)
+    asked = []
+
+    def lane_form(shared):
+        asked.append(shared)
+        return cp.system.lane_form(shared)
+
+    system = replace(cp.system, lane_form=lane_form)
+    rng = np.random.default_rng(3)
+    B = 40
+    x0 = low.initial_state(rng.uniform(-1, 1, (B, 4)), np.zeros((B, 4)), np.zeros((B, 2)), 0.0)
+    which = rng.permutation(np.arange(B) % 2)  # each run's problem, mixed in every thread's lanes
+    P = np.where(which[:, None] == 1, cp_high.params, cp.params)
+    opts = SolverOptions(rtol=1e-9, atol=1e-9)
+    mixed = solve_compiled(system, x0, (0.0, 3.0), params=P, options=opts)
+    assert asked == [False, False] and mixed.lanes.vector  # two threads, the form of a row per lane
+    for k, params in ((0, cp.params), (1, cp_high.params)):
+        runs = np.flatnonzero(which == k)
+        asked.clear()
+        alone = solve_compiled(system, x0[runs], (0.0, 3.0), params=params, options=opts, parallel=False)
+        assert set(asked) == {True}  # one problem: the form that reads the first row
+        for key in ("status", "t_final", "x_final", "n_steps", "n_rejected", "j_final"):
+            np.testing.assert_array_equal(getattr(mixed, key)[runs], getattr(alone, key), err_msg=key)
+    # the two problems send differently: the rows were not mixed up
+    assert not np.array_equal(mixed.j_final[which == 0].mean(), mixed.j_final[which == 1].mean())

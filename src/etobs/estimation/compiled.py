@@ -118,29 +118,37 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     return CompiledProblem(system=system, params=params)
 
 
-#: Each compiled model's lane form (by its one-run form's address): its address, or 0.
-_LANE_FORMS: dict[int, tuple[int, Any]] = {}
+#: Each compiled model's lane forms (by its one-run form's address and ``shared``): address, or 0.
+_LANE_FORMS: dict[tuple[int, bool], tuple[int, Any]] = {}
 
 
 def _lane_form(
-    problem: EstimationProblem, src: Any, functions: dict[str, Any], one: Any, params: np.ndarray
+    problem: EstimationProblem,
+    src: Any,
+    functions: dict[str, Any],
+    one: Any,
+    params: np.ndarray,
+    shared: bool = True,
 ) -> int:
-    """Compile (once per model and process) and check the lane form ``est_lanes``; its address or 0.
+    """Compile (once per model, form and process) and check a lane form; its address or 0.
 
-    Your functions inlined by numba (vector code), else by LLVM (numba cannot inline some
-    closures: said with the note). A lane form that does not compile (it passes a run's
-    state as a strided view: a function that reshapes it does not) leaves the model
-    without one, said once: the engine then calls the one-run form lane by lane.
+    ``shared``: the form for lanes whose parameters are all equal (``est_lanes_shared``),
+    else the one that reads a row per lane (``est_lanes``); each is compiled when first
+    asked for. Your functions inlined by numba (vector code), else by LLVM (numba cannot
+    inline some closures: said with the note). A lane form that does not compile (it
+    passes a run's state as a strided view: a function that reshapes it does not) leaves
+    the model without one, said once: the engine then calls the one-run form lane by lane.
     """
     from etobs.compile.functions import compile_module
 
-    key = int(one.address)
+    key = (int(one.address), bool(shared))
     if key in _LANE_FORMS:
         return _LANE_FORMS[key][0]
+    entry = "est_lanes_shared" if shared else "est_lanes"
     lanes, why, not_inlined = None, "", ""
     for inline in (True, False):
         try:
-            lanes = compile_module(src.text, functions, ("est_lanes",), "estimation model", inline=inline)[0]
+            lanes = compile_module(src.text, functions, (entry,), "estimation model", inline=inline)[0]
             break
         except ModelError as exc:
             why = why or str(exc).removeprefix("the estimation model cannot be compiled: ")

@@ -70,9 +70,11 @@ class CompiledSystem:
     addresses : tuple of int
         Addresses of the flow, guard and jump C functions.
     lane_form : callable, optional
-        Returns the address of the lane form of flow and guard (``0``: none; the kernel
-        then calls the one-run functions lane by lane); called (and so compiled) when a
-        batch first fills :attr:`lane_width` lanes. It is called as the one-run functions are
+        ``lane_form(shared)`` returns the address of the lane form of flow and guard
+        (``0``: none; the kernel then calls the one-run functions lane by lane); called
+        (and so compiled) when a batch first fills :attr:`lane_width` lanes, with
+        ``shared`` true when all runs the kernel call solves have the same parameters
+        (the form may then read them from the first lane's row). It is called as the one-run functions are
         (:mod:`etobs.hybrid._kernel`), with ``a0`` the lanes' states (``n x W``, the lane
         axis last), ``a1`` their times, ``a2`` their scratch (``n_work + 1 x W``), ``a3``
         the shared floats, ``ia = [lo, hi, W, st_0, .., st_(W-1)]`` (it computes lanes
@@ -108,7 +110,7 @@ class CompiledSystem:
     n: int
     n_rules: int
     addresses: tuple[int, int, int]
-    lane_form: Callable[[], int] | None = None
+    lane_form: Callable[[bool], int] | None = None
     lane_width: int = 0
     ia: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
     cf: np.ndarray = field(default_factory=lambda: np.zeros(1))
@@ -526,7 +528,8 @@ def _call(
         W = lanes_for(b - a, lanes)
         # the system's lane form computes lane_width lanes: with fewer, the one-run form lane by lane
         wide = system.lane_form is not None and W == system.lane_width
-        functions = [*system.addresses, system.lane_form() if wide else 0]  # type: ignore[misc]
+        lane_fn = system.lane_form(_shared(P, runs[a:b])) if wide else 0  # type: ignore[misc]
+        functions = [*system.addresses, lane_fn]
         job_system = System(np.array(functions, dtype=np.int64), system.ia, system.cf)
         jobs.append((job_system, np.ascontiguousarray(runs[a:b], dtype=np.int64), part, W))
     counts = np.zeros((len(jobs), 4), dtype=np.int64)
@@ -543,6 +546,12 @@ def _call(
     widths = [job[3] for job in jobs]
     out.count_lanes(counts.sum(axis=0), max(widths, default=1), any(job[0].addresses[3] for job in jobs))
     return tuple(logs)
+
+
+def _shared(P: np.ndarray, runs: np.ndarray) -> bool:
+    """Whether the runs ``runs`` all have the parameters (rows of ``P``) of the first."""
+    rows = P[runs]
+    return bool((rows == rows[:1]).all()) if rows.size else True
 
 
 def lanes_for(runs: int, lanes: int | None) -> int:
