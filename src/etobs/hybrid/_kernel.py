@@ -283,21 +283,19 @@ def _dense_eval(
     Horner's scheme in ``theta``: ``x0 + theta (Q_0 + theta (Q_1 + ...))`` for
     Dormand--Prince 5(4), and for DOP853 (Hairer et al.'s form) with the factors
     ``theta`` and ``1 - theta`` alternating: ``x0 + theta (Q_0 + (1 - theta) (Q_1 +
-    theta (Q_2 + ...)))``. ``out`` is the accumulator; the loop over components is the
-    inner one, so that it vectorizes (the sampled event functions evaluate this on
+    theta (Q_2 + ...)))``. One pass over the components, each summed in a register over
+    the ``nq`` rows (a constant where the kernel inlines it: LLVM unrolls that loop and
+    vectorizes the one over components; the sampled event functions evaluate this on
     every step).
     """
     n = x0.shape[0]
     one_minus = 1.0 - theta
     for i in range(n):
-        out[i] = 0.0
-    for r in range(nq):
-        w = theta if (not dop853 or r % 2 == 0) else one_minus
-        row = nq - 1 - r
-        for i in range(n):
-            out[i] = (out[i] + Q[row, i]) * w
-    for i in range(n):
-        out[i] = x0[i] + out[i]
+        acc = 0.0
+        for r in range(nq):
+            w = theta if (not dop853 or r % 2 == 0) else one_minus
+            acc = (acc + Q[nq - 1 - r, i]) * w
+        out[i] = x0[i] + acc
 
 
 @numba.njit(inline="always", error_model="numpy")
@@ -352,6 +350,8 @@ def tableau_constants(method: str) -> dict[str, object]:
         "TDD": np.ascontiguousarray(tab.dense_d if dop853 else tab.dense_d.T),
         "N_STAGES": s,
         "N_EXTRA": tab.dense_a.shape[0] if tab.dense_a is not None else 0,
+        # the most terms of a sum of stages (_comb): the stages, FSAL and the extra ones
+        "MAX_TERMS": s + 1 + (tab.dense_a.shape[0] if tab.dense_a is not None else 0),
         "NQ": 7 if dop853 else tab.dense_d.shape[1],
         "ERR_ORDER": tab.error_order,
         "DOP853": dop853,
@@ -385,6 +385,7 @@ def build(method: str) -> Any:
                 "zeno.py",
                 "peaks.py",
                 "../compile/ccall.py",
+                "../compile/_stack.py",
             )
         ),
         packages=("scipy",),
