@@ -60,7 +60,9 @@ def test_beyond_it_the_error_is_below_half_an_ulp_of_the_argument(limit):
 def test_the_limits_on_both_sides():
     below, above = np.nextafter(vm.EXACT_UP_TO, 0.0), np.nextafter(vm.EXACT_UP_TO, np.inf)
     assert ulps(many_sin(np.array([below])), np.sin([below]))[0] <= 2.0
+    assert ulps(many_cos(np.array([below, -below])), np.cos([below, -below])).max() <= 2.0
     assert abs(vm.sin(above) - math.sin(above)) <= 0.5 * math.ulp(above)
+    assert abs(vm.cos(above) - math.cos(above)) <= 0.5 * math.ulp(above)
     last = np.nextafter(vm.HUGE, 0.0)
     assert math.isfinite(vm.sin(last)) and math.isfinite(vm.cos(-last))
     assert math.isnan(vm.sin(vm.HUGE)) and math.isnan(vm.cos(-vm.HUGE))
@@ -118,5 +120,6 @@ def test_the_constants_are_pi_and_the_factorials():
     for part in (vm.PIO2_1, vm.PIO2_2):
         mantissa = int(math.frexp(part)[0] * 2**53)
         assert mantissa % 2**20 == 0  # at most 33 significant bits
-    assert vm.TWO_OVER_PI == float(2 / pi)
-    assert [vm.S1, vm.S8, vm.C1, vm.C9] == [-1 / 6, 1 / math.factorial(17), -0.5, -1 / math.factorial(18)]
+    assert vm.ONE_OVER_PI == float(1 / pi)
+    assert (vm.PI_1, vm.PI_2, vm.PI_3) == (2 * vm.PIO2_1, 2 * vm.PIO2_2, 2 * vm.PIO2_3)
+    assert [vm.S1, vm.S2, vm.S10] == [-1 / 6, 1 / 120, 1 / math.factorial(21)]
