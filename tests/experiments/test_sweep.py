@@ -83,9 +83,13 @@ def test_a_failing_chunk_is_recorded_and_the_sweep_goes_on(tmp_path):
 
 def test_factory_errors_name_the_problem(tmp_path):
     with pytest.raises(
-        SpecError, match=r"parameter `q` \(row 0, scenario 'coarse'\) is not an argument of the factory"
+        SpecError,
+        match=r"parameter `q` \(`rows\[0\].q`, row 0, scenario 'coarse'\) is not an argument of the factory",
     ):
         parse_spec(raw_spec(rows=[{"q": 1}])).check()
+    # found by the spec fuzz test: a key of system.fixed is named as one (not as the row's)
+    with pytest.raises(SpecError, match=r"parameter `A` \(`system.fixed.A`, row 0, scenario 'coarse'\)"):
+        parse_spec(raw_spec(system={"factory": FACTORY, "fixed": {"A": False}})).check()
     with pytest.raises(SpecError, match=r"`system.factory` = 'pendulum' is neither a registered example"):
         resolve_factory("pendulum")
     with pytest.raises(SpecError, match=r"`system.factory`: cannot import 'no_such_module'"):

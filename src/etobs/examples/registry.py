@@ -114,10 +114,16 @@ def located(raw: Any, folder: str | Path | None) -> Any:
     return raw if factory == system["factory"] else {**raw, "system": {**system, "factory": factory}}
 
 
-def check_arguments(factory: str, calls: Iterable[tuple[str, dict[str, Any]]]) -> None:
+def check_arguments(
+    factory: str,
+    calls: Iterable[tuple[str, dict[str, Any]]],
+    origin: Callable[[int, str], str] | None = None,
+) -> None:
     """Fail early, naming the key, when a call ``(where, kwargs)`` does not fit the factory.
 
-    The factory itself is not called here (in a sweep, it runs in the workers).
+    ``origin(i, key)``, when given, is the spec key that gave the argument ``key`` of call
+    ``i`` (a sweep's ``system.fixed``, row or scenario), named with ``where``. The factory
+    itself is not called here (in a sweep, it runs in the workers).
     """
     fn = resolve_factory(factory)
     try:
@@ -125,11 +131,12 @@ def check_arguments(factory: str, calls: Iterable[tuple[str, dict[str, Any]]]) -
     except (TypeError, ValueError):  # builtins without a signature: checked when called
         return
     open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values())
-    for where, kwargs in calls:
+    for i, (where, kwargs) in enumerate(calls):
         for key in kwargs:
             if not open_ended and key not in sig.parameters:
+                given = f"`{origin(i, key)}`, {where}" if origin else where
                 raise SpecError(
-                    f"parameter `{key}` ({where}) is not an argument of the factory "
+                    f"parameter `{key}` ({given}) is not an argument of the factory "
                     f"{factory!r}; it takes: {', '.join(sig.parameters) or 'no arguments'}"
                 )
         try:

@@ -144,7 +144,8 @@ class SweepSpec(Experiment):
         factory; the error names the spec key (``rows[2].sigma``). Groups with the same
         arguments are built once.
         """
-        check_arguments(self.factory, [(self.where(g), self.kwargs(g)) for g in range(self.n_groups)])
+        calls = [(self.where(g), self.kwargs(g)) for g in range(self.n_groups)]
+        check_arguments(self.factory, calls, origin=self.origin)
         built = set()
         for g in range(self.n_groups):
             ident = json.dumps(self.group_identity(g), sort_keys=True, default=repr)
