@@ -36,6 +36,7 @@ import numba
 import numpy as np
 
 from _agree import expect, status
+from _ready import ready
 from etobs import Link, Network, SaveAt, simulate
 from etobs.estimation import transmission_counts
 from etobs.examples import random_initial_states, robot_arm
@@ -104,6 +105,7 @@ def main() -> None:
     for name, (pb, share) in cases().items():
         T = t_end * share
         timed(lambda pb=pb, T=T: simulate(pb, x0[:1], min(T, 0.01), backend="engine", save=save))
+        ready(pb)
         eng, te = timed(lambda pb=pb, T=T: simulate(pb, x0, T, backend="engine", save=save))
         ref, ts = timed(lambda pb=pb, T=T: simulate(pb, x0[:ref_runs], T, backend="scipy", save=save))
         shared = simulate(pb, x0[:ref_runs], T, backend="engine", save=save)

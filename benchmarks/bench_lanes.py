@@ -37,6 +37,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+from _ready import ready  # noqa: E402 (a sibling module of this script)
+
 #: The engine before lanes (one run per thread): what --base compares with by default.
 BASE = "752f71e"
 
@@ -54,6 +56,8 @@ x0 = random_initial_states({runs}, seed=2023)
 opts = SolverOptions(rtol=1e-10, atol=1e-10)
 save = SaveAt(steps=False, grid=np.arange(20.0, 30.0 + 1e-9, 0.001), max_distance="estimation_error")
 simulate(pb, x0[:2], 1.0, options=opts)  # compile or load
+from etobs.estimation.compiled import compile_problem
+compile_problem(pb).system.lane_form(True, True)  # the lane form too (the engine does not wait for it)
 best = 1e9
 for _ in range({reps}):
     t = time.perf_counter()
@@ -97,6 +101,7 @@ def in_process(quick: bool) -> None:
     opts = SolverOptions(rtol=1e-10, atol=1e-10)
     save = SaveAt(steps=False, grid=np.arange(20.0, 30.0 + 1e-9, 0.001), max_distance="estimation_error")
     simulate(pb, x0[:2], 1.0, options=opts)
+    ready(pb)
     lanes = comp.LANES
     best = {lanes: 1e9, 1: 1e9}
     sols = {}
@@ -166,7 +171,7 @@ def vector_code(kernel: bool) -> None:
         from etobs.estimation.compiled import compile_problem
         from etobs.estimation.compiled import _LANE_FORMS
         cp = compile_problem(robot_arm())
-        cp.system.lane_form()
+        cp.system.lane_form(True)
         ir = _LANE_FORMS[(int(cp.system.keep[0].address), True)][1].cfunc.inspect_llvm()
         out = {{"model": re.findall(r"<(\\d+) x double>", ir)}}
         if {kernel}:
@@ -202,7 +207,8 @@ def user_model(quick: bool) -> None:
     for name, pb in (("as written (arrays)", um.problem()), ("returning tuples", um.tuple_problem())):
         with warnings.catch_warnings(record=True) as seen:
             warnings.simplefilter("always")
-            simulate(pb, x0, 1.0, progress=False)  # compiles both forms (a full batch fills the lanes)
+            simulate(pb, x0[:1], 1.0, progress=False)  # the one-run form
+            ready(pb)  # and the lane form (the engine compiles a new one on a thread, and goes on)
         said = [str(w.message) for w in seen if "lane form" in str(w.message)]
         best = {}
         for width in (comp.LANES, 1):
@@ -260,11 +266,13 @@ def compile_times() -> None:
         from etobs.hybrid.compiled import _built
         _built("dop853")
         kernel = time.perf_counter() - t
-        t = time.perf_counter()
         from etobs.examples import robot_arm
         from etobs.estimation.compiled import compile_problem
-        compile_problem(robot_arm()).system.lane_form()  # both forms, as a batch compiles them
-        print(json.dumps({"kernel": kernel, "model": time.perf_counter() - t}))
+        t = time.perf_counter()
+        system = compile_problem(robot_arm()).system  # what a new model's first solve waits for
+        first = time.perf_counter() - t
+        system.lane_form(True)  # then its lane form (compiled on a thread while the first batches run)
+        print(json.dumps({"kernel": kernel, "model": first, "lanes": time.perf_counter() - t - first}))
         """
     )
     env = {"ETOBS_CACHE_DIR": folder}
@@ -272,7 +280,14 @@ def compile_times() -> None:
     warm = _python(code, env)
     print("compile times (fresh processes, one fresh cache folder):")
     print(f"  the kernel, once per machine: {cold['kernel']:.1f} s (then {warm['kernel']:.2f} s)")
-    print(f"  a new model: {cold['model']:.1f} s; the same model from the cache: {warm['model']:.2f} s")
+    print(
+        f"  a new model (what its first solve waits for): {cold['model']:.1f} s; from the cache: "
+        f"{warm['model']:.2f} s"
+    )
+    print(
+        f"  its lane form (compiled on a thread while the first batches run lane by lane): "
+        f"{cold['lanes']:.1f} s; from the cache: {warm['lanes']:.2f} s"
+    )
     target("a new model at most 5 s cold, 1 s cached", cold["model"] <= 5.0 and warm["model"] <= 1.0)
 
 

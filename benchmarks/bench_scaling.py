@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from _ready import ready
 from etobs import SaveAt, simulate
 from etobs.examples import random_initial_states, robot_arm, robot_arm_network
 
@@ -29,6 +30,8 @@ def timed(problem, x0, t_end, backends):
     for backend in backends:
         start = time.perf_counter()
         simulate(problem, x0[:1], 1e-3, save=SaveAt(steps=False), backend=backend)
+        if backend == "engine":
+            ready(problem)
         print(f"  ({backend}: compile or reuse for n = {x0.shape[1]}: {time.perf_counter() - start:.2f} s)")
         start = time.perf_counter()
         res = simulate(problem, x0, t_end, save=SaveAt(steps=False), backend=backend)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from etobs import SaveAt, SolverOptions, simulate
+from etobs.estimation.compiled import compile_problem
 from etobs.examples import robot_arm
 from etobs.hybrid import HybridSystem, Status
 from etobs.hybrid.compiled import LANES, solve_compiled
@@ -136,6 +137,7 @@ def test_a_run_gives_the_same_numbers_in_any_lane_batch_and_chunk(arm_batch, mon
     from etobs.hybrid import compiled as comp
 
     problem, x0, save = arm_batch
+    compile_problem(problem).system.lane_form(True)  # ready (the engine does not wait for it)
     base = _arm(problem, x0, save)  # two threads of 20 runs in 16 lanes (the lane form)
     assert base.lanes.vector and base.lanes.width == LANES and base.lanes.events > 0
     assert np.all(base.status == Status.COMPLETED) and base.jumps.t.size > 100
