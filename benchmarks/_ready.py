@@ -1,8 +1,8 @@
 """Benchmarks time the engine with its code ready: the model and its lane form compiled (or loaded).
 
-The engine does not wait for a model's new lane form: it compiles it on a thread and runs
-the first batches lane by lane with the one-run form (the same numbers, 2-4 times
-slower). A benchmark that times the engine calls :func:`ready` before its clock starts.
+A model's lane form is compiled (or loaded from the disk cache) when a batch first fills
+16 lanes, not by a warm-up of one run. A benchmark that times the engine calls
+:func:`ready` before its clock starts, so that the first timed batch does not compile it.
 """
 
 from __future__ import annotations
@@ -14,4 +14,4 @@ def ready(problem: Any, *, shared: bool = True) -> None:
     """Compile or load ``problem``'s engine code, its lane form (``shared``: for runs of one problem) too."""
     from etobs.estimation.compiled import compile_problem
 
-    compile_problem(problem).system.lane_form(shared, True)
+    compile_problem(problem).system.lane_form(shared)

@@ -58,8 +58,8 @@ save = SaveAt(steps=False, grid=np.linspace(20.0, 30.0, 10001), max_distance="es
 simulate(pb, x0[:2], 1.0, options=opts)  # compile or load
 from etobs.estimation.compiled import compile_problem
 system = compile_problem(pb).system
-if getattr(system, "lane_form", None):  # the lane form too (the engine does not wait for it)
-    system.lane_form(True, True)
+if getattr(system, "lane_form", None):  # the lane form too (a warm-up of two runs does not fill lanes)
+    system.lane_form(True)
 best = 1e9
 for _ in range({reps}):
     t = time.perf_counter()
@@ -210,7 +210,7 @@ def user_model(quick: bool) -> None:
         with warnings.catch_warnings(record=True) as seen:
             warnings.simplefilter("always")
             simulate(pb, x0[:1], 1.0, progress=False)  # the one-run form
-            ready(pb)  # and the lane form (the engine compiles a new one on a thread, and goes on)
+            ready(pb)  # and the lane form (compiled when a batch first fills the lanes)
         said = [str(w.message) for w in seen if "lane form" in str(w.message)]
         best = {}
         for width in (comp.LANES, 1):
@@ -269,10 +269,10 @@ def compile_times() -> None:
         from etobs.examples import robot_arm
         from etobs.estimation.compiled import compile_problem
         t = time.perf_counter()
-        system = compile_problem(robot_arm()).system  # what a new model's first solve waits for
+        system = compile_problem(robot_arm()).system  # its one-run form
         first = time.perf_counter() - t
         t = time.perf_counter()
-        system.lane_form(True)  # then its lane form (compiled on a thread while the first batches run)
+        system.lane_form(True)  # then its lane form (compiled when a batch first fills the lanes)
         lanes = time.perf_counter() - t
         t = time.perf_counter()
         simulate(robot_arm(), np.ones((1, 4)), 0.01)  # the kernel: compiled at its first call
@@ -284,15 +284,12 @@ def compile_times() -> None:
     warm = _python(code, env)
     print("compile times (fresh processes, one fresh cache folder):")
     print(f"  the kernel, once per machine: {cold['kernel']:.1f} s (then {warm['kernel']:.2f} s)")
+    new, cached = cold["model"] + cold["lanes"], warm["model"] + warm["lanes"]
     print(
-        f"  a new model (what its first solve waits for): {cold['model']:.1f} s; from the cache: "
-        f"{warm['model']:.2f} s"
+        f"  a new model: {new:.1f} s (its one-run form {cold['model']:.1f} s, its lane form "
+        f"{cold['lanes']:.1f} s); from the cache: {cached:.2f} s"
     )
-    print(
-        f"  its lane form (compiled on a thread while the first batches run lane by lane): "
-        f"{cold['lanes']:.1f} s; from the cache: {warm['lanes']:.2f} s"
-    )
-    target("a new model at most 5 s cold, 1 s cached", cold["model"] <= 5.0 and warm["model"] <= 1.0)
+    target("a new model at most 5 s cold, 1 s cached", new <= 5.0 and cached <= 1.0)
 
 
 def target(what: str, ok: bool) -> None:

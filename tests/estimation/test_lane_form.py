@@ -105,13 +105,12 @@ def test_a_model_that_is_not_vector_code_is_named_once_with_its_cost():
         r"`h` makes arrays per call \(copy\); `f_o` makes arrays per call \(array\)\. Its flow costs \d+ ns"
     )
     with pytest.warns(PerformanceWarning, match=expected):
-        compile_problem(pb).system.lane_form(True)  # as the engine's thread would, on this one
-    res = simulate(pb, np.ones((40, 2)), 1.0, save=SaveAt(steps=False), progress=False)
-    assert np.all(res.solution.status == Status.COMPLETED) and res.solution.lanes.vector  # still computed
+        res = simulate(pb, np.ones((40, 2)), 1.0, save=SaveAt(steps=False), progress=False)
+    assert np.all(res.solution.status == Status.COMPLETED)  # the numbers are still computed
     with warnings.catch_warnings():
         warnings.simplefilter("error", PerformanceWarning)
-        compile_problem(pb).system.lane_form(False)  # said once per process, whichever form
-        simulate(pb, np.ones((40, 2)), 1.0, save=SaveAt(steps=False), progress=False)
+        simulate(pb, np.ones((40, 2)), 1.0, save=SaveAt(steps=False), progress=False)  # said once
+        assert compile_problem(pb).system.lane_form(False) != 0  # the other form: once per model
 
 
 def test_the_robot_arm_is_vector_code_with_no_note():
@@ -147,12 +146,10 @@ def test_runs_with_their_own_parameters_share_lanes_and_get_their_own_numbers():
     cp, cp_high = compile_problem(low), compile_problem(high)
     assert cp.system.keep[0] is cp_high.system.keep[0] and not np.array_equal(cp.params, cp_high.params)
     asked = []
-    for shared in (True, False):  # ready (the engine does not wait for a lane form)
-        cp.system.lane_form(shared)
 
-    def lane_form(shared, wait=True):
+    def lane_form(shared):
         asked.append(shared)
-        return cp.system.lane_form(shared, wait)
+        return cp.system.lane_form(shared)
 
     system = replace(cp.system, lane_form=lane_form)
     rng = np.random.default_rng(3)
@@ -161,8 +158,8 @@ def test_runs_with_their_own_parameters_share_lanes_and_get_their_own_numbers():
     which = rng.permutation(np.arange(B) % 2)  # each run's problem, mixed in every thread's lanes
     P = np.where(which[:, None] == 1, cp_high.params, cp.params)
     opts = SolverOptions(rtol=1e-9, atol=1e-9)
-    mixed = solve_compiled(system, x0, (0.0, 3.0), params=P, options=opts)
-    assert asked == [False, False] and mixed.lanes.vector  # two threads, the form of a row per lane
+    mixed = solve_compiled(system, x0, (0.0, 3.0), params=P, options=opts, parallel=False)
+    assert asked == [False] and mixed.lanes.vector  # the form of a row per lane
     for k, params in ((0, cp.params), (1, cp_high.params)):
         runs = np.flatnonzero(which == k)
         asked.clear()
@@ -172,68 +169,3 @@ def test_runs_with_their_own_parameters_share_lanes_and_get_their_own_numbers():
             np.testing.assert_array_equal(getattr(mixed, key)[runs], getattr(alone, key), err_msg=key)
     # the two problems send differently: the rows were not mixed up
     assert not np.array_equal(mixed.j_final[which == 0].mean(), mixed.j_final[which == 1].mean())
-
-
-def _fresh(rate):
-    """A model whose lane form no process compiled yet (its function's constant is new)."""
-    plant = Plant(f_p=lambda t, x, u, v: (-rate * x[0] + np.sin(t),), h=lambda x: (x[0],), n_x=1, n_y=1)
-    observer = Observer(f_o=lambda t, z, u, ybar, yhat: (ybar[0] - z[0],), n_z=1)
-    rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.1, eps=1e-3, eta0=0.1)
-    return EstimationProblem(plant, observer, nodes=[Node((0,), rule)])
-
-
-def test_a_new_lane_form_is_compiled_on_a_thread_while_the_first_batch_runs_with_the_same_numbers():
-    from etobs.compile.functions import module_ready
-    from etobs.estimation import _model_source as ms
-    from etobs.estimation.compiled import _PENDING
-    from etobs.model.rules import engine_form_of
-
-    pb = _fresh(float(np.random.default_rng().uniform(1.0, 2.0)))  # new in every session
-    src = ms.model_source(pb, [engine_form_of(ch.rule) for ch in pb.layout.channels])
-    functions = {**src.users, **src.helpers}
-    assert not module_ready(src.text, functions, ("est_lanes_shared",))
-    x0 = np.linspace(-1.0, 1.0, 40)[:, None]
-    kw = {"save": SaveAt(steps=False), "progress": False}
-    first = simulate(pb, x0, 2.0, **kw).solution  # does not wait for the lane form
-    assert not first.lanes.vector and first.lanes.width == LANE_WIDTH
-    key = (int(compile_problem(pb).system.keep[0].address), True)
-    _PENDING[key].join()
-    assert module_ready(src.text, functions, ("est_lanes_shared",))  # its machine code is on disk
-    then = simulate(pb, x0, 2.0, **kw).solution
-    assert then.lanes.vector
-    for name in ("status", "t_final", "x_final", "n_steps", "n_rejected", "j_final"):
-        np.testing.assert_array_equal(getattr(first, name), getattr(then, name), err_msg=name)
-    np.testing.assert_array_equal(first.jumps.t, then.jumps.t)
-
-
-_EXIT = textwrap.dedent(
-    """
-    import sys
-    import numpy as np
-    sys.path.insert(0, {tests!r})
-    from estimation.test_lane_form import _fresh
-    from etobs import SaveAt, simulate
-    from etobs.estimation import compiled
-    with compiled._LANE_LOCK:  # the compile on its thread waits for the end of the script
-        res = simulate(_fresh({rate}), np.linspace(-1.0, 1.0, 40)[:, None], 1.0, save=SaveAt(steps=False),
-                       progress=False)
-    print(res.solution.lanes.vector)
-    """
-)
-
-
-def test_a_process_finishes_the_lane_form_it_started_before_it_exits_and_the_next_loads_it():
-    from pathlib import Path
-
-    tests = str(Path(__file__).resolve().parents[1])
-    script = _EXIT.format(tests=tests, rate=float(np.random.default_rng().uniform(2.0, 3.0)))
-
-    def run():
-        out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=900)
-        assert out.returncode == 0, out.stderr[-2000:]
-        return out.stdout.split()[-1], out.stderr
-
-    vector, err = run()
-    assert vector == "False" and "finishing the compile of this model's lane form" in err
-    vector, err = run()  # loaded from the disk cache before the first batch: no wait, no note
-    assert vector == "True" and "finishing" not in err

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from etobs import SaveAt, SolverOptions, simulate
-from etobs.estimation.compiled import compile_problem
 from etobs.examples import robot_arm
 from etobs.hybrid import HybridSystem, Status
 from etobs.hybrid.compiled import LANES, solve_compiled
@@ -137,7 +136,6 @@ def test_a_run_gives_the_same_numbers_in_any_lane_batch_and_chunk(arm_batch, mon
     from etobs.hybrid import compiled as comp
 
     problem, x0, save = arm_batch
-    compile_problem(problem).system.lane_form(True)  # ready (the engine does not wait for it)
     base = _arm(problem, x0, save)  # two threads of 20 runs in 16 lanes (the lane form)
     assert base.lanes.vector and base.lanes.width == LANES and base.lanes.events > 0
     assert np.all(base.status == Status.COMPLETED) and base.jumps.t.size > 100
@@ -180,3 +178,12 @@ def test_a_bad_lane_count_is_named(lanes, match):
     system, modes, x0 = _modes()
     with pytest.raises((InputError, InputTypeError), match=match):
         solve_compiled(system.compiled(), x0[:1], (0.0, 1.0), params=modes[:1], lanes=lanes)
+
+
+def test_runs_share_their_parameters_only_when_every_bit_is_the_same():
+    from etobs.hybrid.compiled import _shared
+
+    P = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, -0.0], [1.0 + 2e-16, 0.0]])
+    assert _shared(P, np.array([0, 1])) and _shared(P, np.array([2])) and _shared(P, np.array([], dtype=int))
+    assert not _shared(P, np.array([0, 2]))  # -0.0 is not 0.0 to a model's copysign or 1/p
+    assert not _shared(P, np.array([1, 3]))

@@ -233,7 +233,8 @@ def compile_module(
     from etobs.compile._store import readonly, store, store_inlined
     from etobs.compile.cache import KEY, cache_dir, install_locator
 
-    key = _module_key(text, users, entries, inline)
+    parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
+    key = _hash_text(f"{_format()}{inline}{entries}{text}{' '.join(parts)}")
     with _LOCK:
         done = _MEMO_MODULES.get(key)
         if done is not None:
@@ -269,33 +270,7 @@ def compile_module(
                 raise ModelError(f"the {what} cannot be compiled: {_reason(exc)}") from cause(exc)
             out.append(CompiledFunction(entry, int(cf.address), cf))
         _MEMO_MODULES[key] = tuple(out)
-        folder = cache_dir()
-        if folder is not None:  # its machine code is on disk now (module_ready)
-            (folder / "modules").mkdir(parents=True, exist_ok=True)
-            (folder / "modules" / key).touch()
         return _MEMO_MODULES[key]
-
-
-def module_ready(text: str, users: dict[str, Any], entries: tuple[str, ...], *, inline: bool = True) -> bool:
-    """Whether :func:`compile_module` would return these entries without compiling them.
-
-    True when this process has them, or when a process compiled them with the disk cache
-    on (a mark it leaves in the cache folder's ``modules``): loading them then takes a
-    fraction of a second, compiling them seconds.
-    """
-    from etobs.compile.cache import cache_dir
-
-    key = _module_key(text, users, entries, inline)
-    if key in _MEMO_MODULES:
-        return True
-    folder = cache_dir()
-    return folder is not None and (folder / "modules" / key).exists()
-
-
-def _module_key(text: str, users: dict[str, Any], entries: tuple[str, ...], inline: bool) -> str:
-    """What a compiled module is cached by: etobs' compile code, the text, the entries, the user functions."""
-    parts = [f"{g}={fingerprint(fn)}" for g, fn in sorted(users.items())]
-    return _hash_text(f"{_format()}{inline}{entries}{text}{' '.join(parts)}")
 
 
 def _refuse_non_function(fn: Any, name: str) -> None:

@@ -416,9 +416,9 @@ def _lanes(c: _Code, src: ModelSource, n: int, n_flow: int, rows: int, n_guard: 
     the kernel passed can alias (:mod:`etobs.compile._stack`), copied out after the loop.
     So LLVM may run the loop over lanes as vector instructions. One loop per function,
     so that the body is inlined with a constant ``k``. ``est_lanes_shared`` is for lanes
-    whose parameter rows are all equal (a batch of one problem): it reads every lane's
-    parameters from the first row, one number for all lanes where ``est_lanes`` gathers
-    one per lane (a flow about a third cheaper).
+    whose parameter rows are all equal, bit for bit (a batch of one problem): it reads
+    every lane's parameters from the first row, one number for all lanes where
+    ``est_lanes`` gathers one per lane (the robot arm's flow: 16 against 40 ns per run).
     """
     for name, row in (("est_lanes", "lane"), ("est_lanes_shared", "0")):
         _lane_entry(c, src, name, row, n, n_flow, rows, n_guard)

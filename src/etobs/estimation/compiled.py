@@ -21,9 +21,6 @@ construction (a python-control ``InterconnectedSystem``, :mod:`etobs.model.pytho
 
 from __future__ import annotations
 
-import atexit
-import sys
-import threading
 import warnings
 from dataclasses import dataclass
 from functools import partial
@@ -123,9 +120,6 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
 
 #: Each compiled model's lane forms (by its one-run form's address and ``shared``): address, or 0.
 _LANE_FORMS: dict[tuple[int, bool], tuple[int, Any]] = {}
-#: Lane forms being compiled on a thread (:func:`_compile_later`), by the key of ``_LANE_FORMS``.
-_PENDING: dict[tuple[int, bool], threading.Thread] = {}
-_LANE_LOCK = threading.RLock()
 
 
 def _lane_form(
@@ -135,44 +129,22 @@ def _lane_form(
     one: Any,
     params: np.ndarray,
     shared: bool = True,
-    wait: bool = True,
 ) -> int:
     """Compile (once per model, form and process) and check a lane form; its address or 0.
 
     ``shared``: the form for lanes whose parameters are all equal (``est_lanes_shared``),
     else the one that reads a row per lane (``est_lanes``); each is compiled when first
-    asked for. With ``wait=False`` (the engine's) a form whose machine code is neither in
-    this process nor in the disk cache is compiled on a thread and 0 returned until it is
-    ready: the batch runs meanwhile on the one-run form, with the same numbers (a new
-    model's first results do not wait seconds for it), and the process finishes the
-    compile before it exits, so that the next one loads it. Your functions inlined by
-    numba (vector code), else by LLVM (numba cannot inline some closures: said with the
-    note). A lane form that does not compile (it passes a run's state as a strided view:
-    a function that reshapes it does not) leaves the model without one, said once: the
-    engine then calls the one-run form lane by lane.
+    asked for. Your functions inlined by numba (vector code), else by LLVM (numba cannot
+    inline some closures: said with the note). A lane form that does not compile (it
+    passes a run's state as a strided view: a function that reshapes it does not) leaves
+    the model without one, said once: the engine then calls the one-run form lane by lane.
     """
-    from etobs.compile.functions import module_ready
-
-    key = (int(one.address), bool(shared))
-    done = _LANE_FORMS.get(key)
-    if done is not None:
-        return done[0]
-    entry = "est_lanes_shared" if shared else "est_lanes"
-    if not wait and not any(module_ready(src.text, functions, (entry,), inline=i) for i in (True, False)):
-        _compile_later(key, partial(_lane_form, problem, src, functions, one, params, shared))
-        return 0
-    with _LANE_LOCK:  # one compile of each form, whichever thread asks first
-        if key not in _LANE_FORMS:
-            _LANE_FORMS[key] = _compiled_lane_form(problem, src, functions, one, params, entry)
-        return _LANE_FORMS[key][0]
-
-
-def _compiled_lane_form(
-    problem: EstimationProblem, src: Any, functions: dict[str, Any], one: Any, params: np.ndarray, entry: str
-) -> tuple[int, Any]:
-    """The lane form ``entry`` compiled and checked: its address (0: none) and what keeps it alive."""
     from etobs.compile.functions import compile_module
 
+    key = (int(one.address), bool(shared))
+    if key in _LANE_FORMS:
+        return _LANE_FORMS[key][0]
+    entry = "est_lanes_shared" if shared else "est_lanes"
     lanes, why, not_inlined = None, "", ""
     for inline in (True, False):
         try:
@@ -187,44 +159,11 @@ def _compiled_lane_form(
             "which gives the same numbers 2-4 times slower; a function that needs a contiguous state "
             "(reshape) can take np.ascontiguousarray(x) (docs/solver.md)"
         )
-        return 0, None
+        _LANE_FORMS[key] = (0, None)
+        return 0
     address = _checked_lanes((one, lanes), problem, src, params, len(problem.rule_names), not_inlined)
-    return address, lanes  # the compiled function kept alive with its address
-
-
-def _compile_later(key: tuple[int, bool], compile_it: Any) -> None:
-    """Run ``compile_it()`` (it fills ``_LANE_FORMS[key]``) on a thread, once per key."""
-    with _LANE_LOCK:
-        if key in _PENDING:
-            return
-        if not _PENDING:
-            atexit.register(_finish_pending)
-
-        def run() -> None:
-            try:
-                compile_it()
-            except Exception as exc:  # compile_it says its own failures; anything else is said here
-                _LANE_FORMS.setdefault(key, (0, None))
-                _say_once(
-                    f"etobs: this model's lane form could not be compiled ({exc!r}): the engine "
-                    "calls its one-run form lane by lane, which gives the same numbers 2-4 times slower"
-                )
-
-        thread = threading.Thread(target=run, name="etobs-lane-form", daemon=True)
-        _PENDING[key] = thread
-        thread.start()
-
-
-def _finish_pending() -> None:
-    """At exit: finish the lane forms still compiling, so that their machine code reaches the disk cache."""
-    running = [t for t in _PENDING.values() if t.is_alive()]
-    if running:
-        print(
-            "etobs: finishing the compile of this model's lane form for the next runs (once; then cached)",
-            file=sys.stderr,
-        )
-    for thread in running:
-        thread.join()
+    _LANE_FORMS[key] = (address, lanes)  # keeps the compiled function alive
+    return address
 
 
 def _checked_lanes(

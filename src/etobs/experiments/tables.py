@@ -174,9 +174,12 @@ def warm_table_writers() -> None:
     An experiment's driver calls it on a thread while its chunks run, so that writing the
     tables after the last chunk does not wait for the imports (:func:`to_parquet`).
     """
-    import pyarrow as pa
+    try:
+        import pyarrow as pa
 
-    pa.array([0.0], type=pa.float64())
+        pa.array([0.0], type=pa.float64())
+    except Exception:  # only a head start: writing the tables imports it again, and says what failed
+        return
 
 
 def to_arrow(rows: list[dict[str, Any]]) -> Any:

@@ -520,12 +520,8 @@ def _kernel(system, problem, options, out, logs, runs, W, stats):
                 t1 = t_end if LAST[lane] != 0 else TT[lane] + HH[lane]
                 g = GNEXT[lane]
                 if g < n_grid and grid[g] <= t1:
-                    # the step's dense output, contiguous: each grid point then reads 7 n
-                    # neighbouring numbers instead of 7 n cache lines
-                    for q in range(n):
-                        x0c[q] = X[q, lane]
-                        for r in range(NQ):
-                            qc[r, q] = Q[r, q, lane]
+                    # each grid point then reads 7 n neighbouring numbers, not 7 n cache lines
+                    _lane_dense(X, Q, lane, n, x0c, qc)
                 GNEXT[lane] = _grid_points(
                     grid,
                     g,
@@ -810,12 +806,7 @@ def _accepted(
     hh = HH[lane]
     last = LAST[lane] != 0
     t1 = t_end if last else t_start + hh
-    # the lane's step start and dense output, contiguous (as fast to read as one run's)
-    for q in range(n):
-        x0c[q] = X[q, lane]
-    for r in range(NQ):
-        for q in range(n):
-            qc[r, q] = Q[r, q, lane]
+    _lane_dense(X, Q, lane, n, x0c, qc)  # as fast to read as one run's
     xv = x0c
     qv = qc
     accept = True
@@ -884,6 +875,16 @@ def _accepted(
         if last:
             st = COMPLETED
     ST[lane] = st
+
+
+@jit_inline
+def _lane_dense(X, Q, lane, n, x0c, qc):
+    """Lane ``lane``'s step start ``x0c`` and dense output ``qc``, contiguous copies."""
+    for q in range(n):
+        x0c[q] = X[q, lane]
+    for r in range(NQ):
+        for q in range(n):
+            qc[r, q] = Q[r, q, lane]
 
 
 @jit_inline

@@ -70,18 +70,16 @@ class CompiledSystem:
     addresses : tuple of int
         Addresses of the flow, guard and jump C functions.
     lane_form : callable, optional
-        ``lane_form(shared, wait)`` returns the address of the lane form of flow and guard
+        ``lane_form(shared)`` returns the address of the lane form of flow and guard
         (``0``: none; the kernel then calls the one-run functions lane by lane); called
         (and so compiled) when a batch first fills :attr:`lane_width` lanes, with
         ``shared`` true when all runs the kernel call solves have the same parameters
-        (the form may then read them from the first lane's row). The engine calls it with
-        ``wait=False``: a form it may then compile later returns 0 until it is ready. The
-        form is called as the one-run functions are (:mod:`etobs.hybrid._kernel`), with
-        ``a0`` the lanes' states (``n x W``, the lane axis last), ``a1`` their times,
-        ``a2`` their scratch (``n_work + 1 x W``), ``a3`` the shared floats,
-        ``ia = [lo, hi, W, st_0, .., st_(W-1)]`` (it computes lanes ``lo .. hi-1`` and
-        writes each lane's status at ``st_l``), ``p`` the parameters (``W x n_params``:
-        one row per lane) and ``out`` the results (``rows x W``).
+        (the form may then read them from the first lane's row). It is called as the one-run functions are
+        (:mod:`etobs.hybrid._kernel`), with ``a0`` the lanes' states (``n x W``, the lane
+        axis last), ``a1`` their times, ``a2`` their scratch (``n_work + 1 x W``), ``a3``
+        the shared floats, ``ia = [lo, hi, W, st_0, .., st_(W-1)]`` (it computes lanes
+        ``lo .. hi-1`` and writes each lane's status at ``st_l``), ``p`` the parameters
+        (``W x n_params``: one row per lane) and ``out`` the results (``rows x W``).
     lane_width : int
         The ``W`` the lane form computes (a constant of its code): the kernel calls it only
         when it advances that many lanes.
@@ -112,7 +110,7 @@ class CompiledSystem:
     n: int
     n_rules: int
     addresses: tuple[int, int, int]
-    lane_form: Callable[[bool, bool], int] | None = None
+    lane_form: Callable[[bool], int] | None = None
     lane_width: int = 0
     ia: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
     cf: np.ndarray = field(default_factory=lambda: np.zeros(1))
@@ -530,7 +528,7 @@ def _call(
         W = lanes_for(b - a, lanes)
         # the system's lane form computes lane_width lanes: with fewer, the one-run form lane by lane
         wide = system.lane_form is not None and W == system.lane_width
-        lane_fn = system.lane_form(_shared(P, runs[a:b]), False) if wide else 0  # type: ignore[misc]
+        lane_fn = system.lane_form(_shared(P, runs[a:b])) if wide else 0  # type: ignore[misc]
         functions = [*system.addresses, lane_fn]
         job_system = System(np.array(functions, dtype=np.int64), system.ia, system.cf)
         jobs.append((job_system, np.ascontiguousarray(runs[a:b], dtype=np.int64), part, W))
@@ -551,8 +549,11 @@ def _call(
 
 
 def _shared(P: np.ndarray, runs: np.ndarray) -> bool:
-    """Whether the runs ``runs`` all have the parameters (rows of ``P``) of the first."""
-    rows = P[runs]
+    """Whether the runs ``runs`` all have the parameters (rows of ``P``) of the first, bit for bit.
+
+    Bits, not values: ``-0.0 == 0.0``, yet a model may tell them apart (``copysign``, ``1/p``).
+    """
+    rows = np.ascontiguousarray(P[runs]).view(np.uint64)
     return bool((rows == rows[:1]).all()) if rows.size else True
 
 
