@@ -12,7 +12,6 @@ arrive, so an interrupted experiment resumes with what it finished.
 from __future__ import annotations
 
 import json
-import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -25,7 +24,6 @@ from etobs.experiments.common import Experiment, normalize
 from etobs.experiments.executors import WorkersLost, check_execution, execute
 from etobs.experiments.runner import Task
 from etobs.experiments.store import ResultStore, atomic_write, task_key
-from etobs.experiments.tables import warm_table_writers
 
 
 @dataclass(frozen=True)
@@ -103,8 +101,6 @@ def run_groups(
     Other parameters as in :func:`~etobs.experiments.sweep.run_sweep`.
     """
     tasks, reused = plan(spec, store, chunk or spec.chunk_size)
-    if tasks:  # while the chunks run, import what writing the tables after them needs
-        threading.Thread(target=warm_table_writers, name="etobs-warm-tables", daemon=True).start()
     pending: dict[int, int] = {}
     for t in tasks:
         pending[t.group] = pending.get(t.group, 0) + 1

@@ -168,20 +168,6 @@ def to_parquet(rows: list[dict[str, Any]]) -> bytes:
     return buf.getvalue()
 
 
-def warm_table_writers() -> None:
-    """Import pyarrow and what it loads on its first array (pandas): half a second.
-
-    An experiment's driver calls it on a thread while its chunks run, so that writing the
-    tables after the last chunk does not wait for the imports (:func:`to_parquet`).
-    """
-    try:
-        import pyarrow as pa
-
-        pa.array([0.0], type=pa.float64())
-    except Exception:  # only a head start: writing the tables imports it again, and says what failed
-        return
-
-
 def to_arrow(rows: list[dict[str, Any]]) -> Any:
     """The rows as a ``pyarrow.Table``, typed as in :func:`to_parquet`."""
     import pyarrow as pa
