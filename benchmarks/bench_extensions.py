@@ -3,8 +3,8 @@
 The robot arm (section 8) with, one at a time: an input node (section 7.3; send-on-delta
 0.05 on the input ``u``), the observer-copy hold (Remark 3), a network (20 % Bernoulli
 loss, 10 ms delay) and the generalized rule (section 7.1, eq. (44)--(45)). Each case
-runs a batch of random initial states with ``backend="engine"`` (compiled, one run per
-thread) and the first few of them with ``backend="scipy"`` (the ``solve_ivp`` reference
+runs a batch of random initial states with ``backend="engine"`` (compiled, 16 runs side
+by side per thread) and the first few of them with ``backend="scipy"`` (the ``solve_ivp`` reference
 on the Python functions), in one process; the figures that matter are the per-run time
 ratio and whether both send the same transmissions on the shared runs (and, with the
 network, lose and apply the same packets).

@@ -2,7 +2,7 @@
 
 The two backends of ``simulate`` run the paper's robot arm (section 8), written once
 for one run (``etobs.examples.robot_arm``), from the same random initial states:
-``backend="engine"`` (compiled, one run per thread) and ``"scipy"`` (``solve_ivp``, the
+``backend="engine"`` (compiled, 16 runs side by side per thread) and ``"scipy"`` (``solve_ivp``, the
 Python functions as written). The figures that matter are the per-run time ratio,
 measured in one process on the same runs (these machines are shared and noisy, so
 absolute times vary).

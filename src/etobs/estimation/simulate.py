@@ -56,8 +56,8 @@ def simulate(
         ``max |x - xhat|`` over ``g`` is kept, computed while the run is solved (what a
         sweep needs, without the grid's memory); :func:`max_estimation_error` reads it.
     backend : {"auto", "engine", "scipy"}
-        ``"engine"``: the compiled solver (:mod:`etobs.estimation.compiled`), one run per
-        thread, with the model's functions compiled; it runs every etobs rule and
+        ``"engine"``: the compiled solver (:mod:`etobs.estimation.compiled`), 16 runs side
+        by side per thread, with the model's functions compiled; it runs every etobs rule and
         extension. ``"scipy"``: the ``solve_ivp`` reference, which calls your Python
         functions as they are (any Python). ``"auto"`` (default) is the engine, or the
         reference for a rule of your own (a ``TriggerRule`` the engine cannot compile) or a
