@@ -5,6 +5,7 @@ generated from the same body as the one-run form (:mod:`etobs.estimation._model_
 """
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -169,3 +170,41 @@ def test_runs_with_their_own_parameters_share_lanes_and_get_their_own_numbers():
             np.testing.assert_array_equal(getattr(mixed, key)[runs], getattr(alone, key), err_msg=key)
     # the two problems send differently: the rows were not mixed up
     assert not np.array_equal(mixed.j_final[which == 0].mean(), mixed.j_final[which == 1].mean())
+
+
+def test_the_lane_check_is_compiled_once_per_machine_not_per_process(tmp_path):
+    """The loops that check a lane form come from numba's disk cache in the next process.
+
+    Written inside a function they were closures, which numba's cache keys by their cells:
+    every process compiled them again (0.44 s of each sweep worker's start) and wrote a new
+    cache file (hundreds in a test run). Two fresh processes check the robot arm's lane
+    form: the second compiles neither loop and writes no file.
+    """
+    code = textwrap.dedent(
+        """
+        import json
+        from etobs.estimation import _lane_probe as lp
+        from etobs.estimation.compiled import compile_problem
+        from etobs.examples import robot_arm
+        assert compile_problem(robot_arm()).system.lane_form(True) != 0
+        print(json.dumps([[f.stats.cache_hits.total(), f.stats.cache_misses.total()]
+                          for f in (lp._call_lanes, lp._call_ones)]))
+        """
+    )
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "numba"), "ETOBS_CACHE_DIR": str(tmp_path / "etobs")}
+
+    def run() -> list:
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            env={**os.environ, **env},
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    assert run() == [[0, 1], [0, 1]]  # each loop compiled (hits, misses), by the first process
+    files = sorted(p.name for p in (tmp_path / "numba").rglob("*_call_*"))
+    assert run() == [[1, 0], [1, 0]]  # loaded from the disk cache
+    assert sorted(p.name for p in (tmp_path / "numba").rglob("*_call_*")) == files

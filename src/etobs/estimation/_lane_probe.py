@@ -17,7 +17,10 @@ import time
 import types
 from typing import Any
 
+import numba
 import numpy as np
+
+from etobs.compile.ccall import ccall
 
 #: Names in a user function's code that keep a loop over lanes from becoming vector code.
 _ALLOCATES = {"array", "zeros", "empty", "ones", "copy", "concatenate", "stack", "hstack", "vstack", "append"}
@@ -154,36 +157,24 @@ def _scan(fn: Any, found: list[str], seen: set[int]) -> None:
             _scan(value, found, seen)
 
 
-_COMPILED: dict[str, Any] = {}
+@numba.njit(cache=True)
+def _call_lanes(addr, k, reps, q, ts, work, cf, ia, P1, out):  # type: ignore[no-untyped-def]
+    """Call the lane form at ``addr`` ``reps`` times on all lanes; its last status.
+
+    At module level, not made in a function: numba keys its disk cache of a closure by
+    the closure's cells, which differ in every process, so a closure was compiled again
+    (0.44 s, the lane check's whole cost) and written to a new cache file in every
+    process that checked a model, hundreds of files in a test run.
+    """
+    ok = 1
+    for _ in range(reps):
+        ok = ccall(addr, k, 0.0, q, ts, work, cf, ia, P1, out)  # type: ignore[call-arg]
+    return ok
 
 
-def _call_lanes(*args: Any) -> int:
-    return int(_kernels()["lanes"](*args))
-
-
-def _call_ones(*args: Any) -> None:
-    _kernels()["ones"](*args)
-
-
-def _kernels() -> dict[str, Any]:
-    """Two loops that call a model's forms by address ``reps`` times (compiled once, cached)."""
-    if not _COMPILED:
-        import numba
-
-        from etobs.compile.ccall import ccall
-
-        @numba.njit(cache=True)
-        def lanes(addr, k, reps, q, ts, work, cf, ia, P1, out):  # type: ignore[no-untyped-def]
-            ok = 1
-            for _ in range(reps):
-                ok = ccall(addr, k, 0.0, q, ts, work, cf, ia, P1, out)
-            return ok
-
-        @numba.njit(cache=True)
-        def ones(addr, k, reps, q1, ts, work, cf, ia, P1, out1, st):  # type: ignore[no-untyped-def]
-            for _ in range(reps):
-                for lane in range(q1.shape[0]):
-                    st[lane] = ccall(addr, k, ts[lane], q1[lane], cf, work, cf, ia, P1[lane], out1[lane])
-
-        _COMPILED.update(lanes=lanes, ones=ones)
-    return _COMPILED
+@numba.njit(cache=True)
+def _call_ones(addr, k, reps, q1, ts, work, cf, ia, P1, out1, st):  # type: ignore[no-untyped-def]
+    """Call the one-run form at ``addr`` ``reps`` times on each lane's state in turn."""
+    for _ in range(reps):
+        for lane in range(q1.shape[0]):
+            st[lane] = ccall(addr, k, ts[lane], q1[lane], cf, work, cf, ia, P1[lane], out1[lane])  # type: ignore[call-arg]
