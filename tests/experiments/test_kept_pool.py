@@ -1,6 +1,7 @@
 """A process pool kept across calls (the trials of a tuning): the same records, and a broken one replaced."""
 
 import os
+import sys
 from concurrent.futures.process import BrokenProcessPool
 
 import pytest
@@ -55,3 +56,32 @@ def test_a_pool_a_dead_worker_broke_is_replaced_and_its_calls_still_finish(tiny)
         assert usable_pool(new, 1) is new  # a working pool is kept
     finally:
         new.shutdown()
+
+
+@pytest.mark.parametrize(
+    ("how", "calls"), [({"executor": "serial"}, 0), ({"executor": "process", "workers": 1}, 1)]
+)
+def test_the_drivers_own_work_runs_once_while_workers_compute(tiny, how, calls):
+    """``while_running``: once on a pool (after the chunks are handed over), never serially."""
+    said = []
+    got = {}
+    execute(
+        tasks(tiny),
+        type(tiny),
+        tiny.raw,
+        lambda t, r: got.setdefault(t.group, r),
+        lambda t, m: pytest.fail(m),
+        while_running=lambda: said.append(len(got)),
+        **how,
+    )
+    assert len(said) == calls
+    assert sorted(got) == list(range(tiny.n_groups))  # every chunk reported all the same
+
+
+def test_loading_the_table_writers_early_leaves_a_failure_to_the_writer(monkeypatch, tmp_path):
+    from etobs.experiments.tables import load_writers, write_table
+
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # not importable
+    load_writers()  # says nothing: the sweep goes on
+    with pytest.raises(ImportError, match="pyarrow"):
+        write_table(tmp_path, "runs", [{"run": 0}])

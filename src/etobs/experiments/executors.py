@@ -54,23 +54,32 @@ def execute(
     scheduler: str | None = None,
     client: Any = None,
     pool: ProcessPoolExecutor | None = None,
+    while_running: Callable[[], None] | None = None,
 ) -> None:
     """Run ``tasks`` of the experiment ``kind.from_raw(raw_spec)``, reporting each as it finishes.
 
     ``pool`` (from :func:`process_pool`) serves the process executor across calls, so that
     many small experiments (the trials of a tuning) do not each start workers that load
     the compiled model again; without it each call starts its own pool.
+    ``while_running`` is called once in this thread once the chunks are handed to
+    workers (a process pool or Dask), so that the driver's own set-up for afterwards
+    (importing the table writers, say) overlaps them; the serial executor never calls it.
     """
     check_execution(executor, workers)
     if not tasks:
         return
     job = (kind, raw_spec)
+    started = while_running or _nothing
     if executor == "serial":
         _serial(tasks, job, on_done, on_error)
     elif executor == "process":
-        _process(tasks, job, on_done, on_error, workers, pool)
+        _process(tasks, job, on_done, on_error, workers, pool, started)
     else:
-        _dask(tasks, job, on_done, on_error, scheduler, client)
+        _dask(tasks, job, on_done, on_error, scheduler, client, started)
+
+
+def _nothing() -> None:
+    return None
 
 
 #: Local worker processes per core at most: the runs are CPU-bound, so more only costs
@@ -132,10 +141,11 @@ def _process(
     on_error: Failed,
     workers: int | None,
     pool: ProcessPoolExecutor | None = None,
+    started: Callable[[], None] = _nothing,
 ) -> None:
     ctx = _SPAWN
     if pool is None:
-        lost = _pool_round(list(tasks), job, on_done, on_error, workers, ctx)
+        lost = _pool_round(list(tasks), job, on_done, on_error, workers, ctx, started)
     else:
         futures: dict[Any, Task] = {}
         try:
@@ -144,6 +154,7 @@ def _process(
         except BrokenProcessPool:  # a worker died: every chunk goes the lost chunks' way below
             lost = list(tasks)
         else:
+            started()
             lost = _collect(futures, on_done, on_error)
     # A dead worker breaks the whole pool and every pending chunk with it. Rerun those
     # chunks one at a time, so only a chunk that itself kills its worker is blamed.
@@ -176,7 +187,13 @@ def _worker_init(driver: int) -> None:
 
 
 def _pool_round(
-    tasks: list[Task], job: Job, on_done: Done, on_error: Failed, workers: int | None, ctx: Any
+    tasks: list[Task],
+    job: Job,
+    on_done: Done,
+    on_error: Failed,
+    workers: int | None,
+    ctx: Any,
+    started: Callable[[], None] = _nothing,
 ) -> list[Task]:
     """Run ``tasks`` on a fresh pool; return those lost because a worker died.
 
@@ -187,7 +204,9 @@ def _pool_round(
         max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),)
     )
     try:
-        return _collect({pool.submit(run_task, *job, t): t for t in tasks}, on_done, on_error)
+        futures = {pool.submit(run_task, *job, t): t for t in tasks}
+        started()
+        return _collect(futures, on_done, on_error)
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
 
@@ -215,6 +234,7 @@ def _dask(
     on_error: Failed,
     scheduler: str | None,
     client: Any,
+    started: Callable[[], None] = _nothing,
 ) -> None:
     try:
         from dask.distributed import Client
@@ -239,6 +259,7 @@ def _dask(
     try:
         futures = [client.submit(run_task, *job, t, pure=False) for t in tasks]
         index = {f.key: t for f, t in zip(futures, tasks, strict=True)}
+        started()
         pending = dask_completed(futures)
         lost_since: float | None = None
         while not pending.is_empty():

@@ -91,13 +91,16 @@ def run_groups(
     progress: bool | None = None,
     on_group: Callable[[int, dict[int, dict[str, Any]]], None] | None = None,
     pool: Any = None,
+    while_running: Callable[[], None] | None = None,
 ) -> tuple[int, int]:
     """Compute the runs of ``spec`` missing from ``store``; return how many were computed and reused.
 
     Call it inside :func:`experiment_folder` (which checks the arguments).
     ``on_group(g, records)`` is called once every chunk of group ``g`` computed by this
     call has been stored or has failed, with the group's stored records by run. ``pool``
-    is a process pool kept across calls (:func:`~etobs.experiments.executors.process_pool`).
+    is a process pool kept across calls (:func:`~etobs.experiments.executors.process_pool`);
+    ``while_running`` is called once while workers compute (see
+    :func:`~etobs.experiments.executors.execute`).
     Other parameters as in :func:`~etobs.experiments.sweep.run_sweep`.
     """
     tasks, reused = plan(spec, store, chunk or spec.chunk_size)
@@ -143,6 +146,7 @@ def run_groups(
             scheduler=scheduler,
             client=client,
             pool=pool,
+            while_running=while_running,
         )
     except WorkersLost as exc:  # one line: what ended it, and what is kept
         kept = reused + computed

@@ -18,6 +18,7 @@ from etobs.experiments.store import ResultStore, atomic_write, last_line
 from etobs.experiments.tables import (
     aggregate,
     flatten_params,
+    load_writers,
     not_completed,
     run_rows,
     status_notes,
@@ -128,6 +129,7 @@ def run_sweep(
             client=client,
             chunk=chunk,
             progress=progress,
+            while_running=load_writers,
         )
         result = collect(spec, store, computed=computed, reused=reused)
         _write_outputs(result, started)

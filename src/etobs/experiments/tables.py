@@ -204,6 +204,22 @@ def _arrow_column(values: list[Any]) -> Any:
     return pa.array([None if v is None else str(v) for v in values], type=pa.string())  # as in the CSV
 
 
+def load_writers() -> None:
+    """Import what :func:`write_table` needs, so that a sweep can do it while its workers compute.
+
+    pyarrow (0.2 s), and pandas, which pyarrow imports at its first conversion when it
+    is installed (0.3 s): half a second of Table 1's tail before. A failure is left for
+    :func:`write_table` to raise where it matters.
+    """
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet
+
+        pa.array([0])
+    except Exception:  # raised again, with its context, by the writer
+        pass
+
+
 def write_table(folder: Path, name: str, rows: list[dict[str, Any]]) -> None:
     """Write ``folder/name.csv`` and its typed twin ``folder/name.parquet``, each atomically."""
     atomic_write(folder / f"{name}.csv", to_csv(rows))
