@@ -22,9 +22,10 @@ lint: $(VENV)/.installed-test
 	$(BIN)/ruff format --check src tests benchmarks examples
 	$(BIN)/mypy
 
-## test: lint, the whole test suite (slow tests included), the benchmarks in quick mode
+## test: lint, the whole test suite (slow tests included, one process per core, each test
+## file in one process: pytest-xdist), the benchmarks in quick mode
 test: lint
-	$(BIN)/python -m pytest --doctest-modules src tests
+	$(BIN)/python -m pytest -n auto --dist loadfile --doctest-modules src tests
 	$(BIN)/python benchmarks/bench_robot_arm.py --quick
 	$(BIN)/python benchmarks/bench_scaling.py --quick
 	$(BIN)/python benchmarks/bench_accuracy.py --quick
@@ -37,7 +38,7 @@ test: lint
 
 ## test-fast: the test suite without the tests marked slow
 test-fast: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -m "not slow" src tests --doctest-modules
+	$(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" src tests --doctest-modules
 
 ## bench: the benchmarks at full size
 bench: $(VENV)/.installed-test
