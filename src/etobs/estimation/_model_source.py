@@ -353,20 +353,32 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     # the model of one run, on 1-D arrays: the flow (k = -1) into ``out``, the guard (k = -2)
     # into ``out``, the jump of rule k >= 0 into ``q``; it returns a status
     rows = max(lay.n, len(nodes) * (2 if network >= 0 else 1))
-    c.line("def body(k, t, q, p, work, out):")
-    c.indent()
-    c.line("if k == -1:")
+    # the flow and the guard are functions of their own, so that the lane form inlines
+    # only them: inlining the whole body (its jumps too) twice was two thirds of the
+    # lane form's compile (numba copies the IR it inlines)
+    c.line("def flow(t, q, p, work, out):")
     c.indent()
     c.line("dq = out")
     _flow(c, at, groups, lay.n_flow or lay.n)
     c.line("return 1")
     c.dedent()
-    c.line("if k == -2:")
+    c.line("")
+    c.line("def guard(t, q, p, work, out):")
     c.indent()
     c.line("g = out")
     _guard(c, at, groups)
     c.line("return 1")
     c.dedent()
+    c.line("")
+    c.line("FLOW = inline(flow)")
+    c.line("GUARD = inline(guard)")
+    c.line("")
+    c.line("def body(k, t, q, p, work, out):")
+    c.indent()
+    c.line("if k == -1:")
+    c.line("    return FLOW(t, q, p, work, out)")
+    c.line("if k == -2:")
+    c.line("    return GUARD(t, q, p, work, out)")
     _jump(c, at, groups)
     c.line("return 1")
     c.dedent()
@@ -376,7 +388,6 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     # after them (a jump's last write into q was lost); inlined into ``est_lanes``' loop,
     # which writes only into arrays read after the loop (checked by lane_form_agrees)
     c.line("BODY = jit(body)")
-    c.line("BODY_LANES = inline(body)")
     c.line("")
     # two C functions (:func:`etobs.compile.functions.c_signature`) of the one body: the
     # kernel calls ``est`` as the flow with k = -1, the guard with k = -2 and the jump of
@@ -415,7 +426,7 @@ def _lanes(c: _Code, src: ModelSource, n: int, n_flow: int, rows: int, n_guard: 
     reshapes them needs); the scratch and the results are arrays on the stack, which nothing
     the kernel passed can alias (:mod:`etobs.compile._stack`), copied out after the loop.
     So LLVM may run the loop over lanes as vector instructions. One loop per function,
-    so that the body is inlined with a constant ``k``. ``est_lanes_shared`` is for lanes
+    so that it inlines one of the flow and the guard. ``est_lanes_shared`` is for lanes
     whose parameter rows are all equal, bit for bit (a batch of one problem): it reads
     every lane's parameters from the first row, one number for all lanes where
     ``est_lanes`` gathers one per lane (the robot arm's flow: 16 against 40 ns per run).
@@ -440,10 +451,10 @@ def _lane_entry(
     c.line(f"res = carray(stack_f8({rows * W}), ({rows}, {W}))")
     c.line(f"sts = carray(stack_i8({W}), ({W},))")
     # the flow's rows from n_flow on are not written, as the one-run form leaves them
-    for k, n_out in ((-1, n_flow), (-2, n_guard)):
+    for k, fn, n_out in ((-1, "FLOW", n_flow), (-2, "GUARD", n_guard)):
         c.line(f"if k == {k}:")
         c.indent()
-        call = f"BODY_LANES({k}, ts[lane], q[:, lane], p[{row}], work[:, lane], res[:, lane])"
+        call = f"{fn}(ts[lane], q[:, lane], p[{row}], work[:, lane], res[:, lane])"
         c.line(f"for lane in range({W}):")
         c.line(f"    sts[lane] = {call}")
         c.line(f"for i in range({n_out}):")

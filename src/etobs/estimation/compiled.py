@@ -90,7 +90,7 @@ def compile_problem(problem: EstimationProblem) -> CompiledProblem:
     functions = {**src.users, **src.helpers}
     one, why = None, ""
     try:  # LLVM inlines your functions (each compiled and cached on its own): the fastest compile
-        one = compile_module(src.text, functions, ("est",), "estimation model", inline=True)[0]
+        one = compile_module(src.text, functions, ("est",), "estimation model", inline=False)[0]
     except ModelError as exc:
         why = str(exc)
     if one is None:
