@@ -310,11 +310,31 @@ def test_max_distance_is_nan_for_a_run_that_stops_before_the_grid_ends(backend):
 def test_max_distance_is_nan_when_grid_points_lie_before_the_start(backend):
     pairs = ([0], [1])
     args = (two_clocks(0.5, 0.3), [0.0, 0.0], (0.75, 2.0))
-    for grid in ([0.5, 1.0, 1.5], [0.2, 0.4]):
-        sol = solve(*args, save=SaveAt(steps=False, grid=grid, max_distance=pairs), backend=backend)
+    for grid, n in (([0.5, 1.0, 1.5], 1), ([0.2, 0.4], 2)):
+        with pytest.warns(
+            RuntimeWarning, match=rf"`save.grid`: {n} of {len(grid)} points lie before t0 = 0.75"
+        ):
+            sol = solve(*args, save=SaveAt(steps=False, grid=grid, max_distance=pairs), backend=backend)
         assert np.isnan(sol.grid_max.value[0])
-    sol = solve(*args, save=SaveAt(steps=False, grid=[1.0, 1.5], max_distance=pairs), backend=backend)
-    assert np.isfinite(sol.grid_max.value[0])
+    sol = solve(*args, save=SaveAt(steps=False, grid=[0.75, 1.5], max_distance=pairs), backend=backend)
+    assert np.isfinite(sol.grid_max.value[0])  # t0 itself is reached: nothing said
+
+
+def test_grid_points_past_t_end_are_said_and_nan_and_t_end_itself_is_reached(backend):
+    """np.arange(1, 2 + 1e-9, 0.1) ends a rounding error past 2.0: said, not left NaN in silence."""
+    pairs = ([0], [1])
+    args = (two_clocks(0.5, 0.3), [0.0, 0.0], (0.0, 2.0))
+    past = [1.0, np.nextafter(2.0, 3.0)]
+    with pytest.warns(
+        RuntimeWarning, match=r"1 of 2 points lie after t_end = 2.0 \(the last at 2.0000000000000004"
+    ):
+        sol = solve(*args, save=SaveAt(steps=False, grid=past, max_distance=pairs), backend=backend)
+    assert np.isnan(sol.grid_max.value[0])
+    with pytest.warns(RuntimeWarning, match=r"np.linspace\(start, t_end, n\) rather than np.arange"):
+        kept = solve(*args, save=SaveAt(steps=False, grid=past), backend=backend)
+    assert np.isfinite(kept.grid.x[0, 0]).all() and np.isnan(kept.grid.x[0, 1]).all()
+    sol = solve(*args, save=SaveAt(steps=False, grid=[1.0, 2.0], max_distance=pairs), backend=backend)
+    assert np.isfinite(sol.grid_max.value[0])  # t_end itself: reached, nothing said
 
 
 @pytest.mark.parametrize(

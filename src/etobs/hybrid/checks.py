@@ -7,6 +7,7 @@ check their arguments here, below all of them, so that none imports the front do
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -55,6 +56,36 @@ def span(t_span: Any) -> tuple[float, float]:
     if t_end < t0:
         raise InputError(f"`t_span` must satisfy t0 <= t_end; got ({t0:g}, {t_end:g})")
     return t0, t_end
+
+
+def warn_unreached_grid(grid: Any, t0: float, t_end: float) -> None:
+    """Say, with a ``RuntimeWarning``, when points of a ``SaveAt`` grid lie outside ``[t0, t_end]``.
+
+    A run never reaches them, so their states are NaN and a ``max_distance`` over the
+    grid is NaN: said rather than left to be found in the results. The usual cause is
+    ``np.arange``, whose last point can lie a rounding error past its end.
+    """
+    if grid is None or len(grid) == 0:
+        return
+    g = np.asarray(grid, dtype=float)
+    after, before = int(np.sum(g > t_end)), int(np.sum(g < t0))
+    if after:
+        warnings.warn(
+            f"`save.grid`: {after} of {g.size} points lie after t_end = {t_end!r} (the last at "
+            f"{float(g[-1])!r}, t_end + {float(g[-1]) - t_end:.3g}): no run reaches them, so their values "
+            "(and a max_distance over the grid) are NaN; end the grid at t_end, e.g. "
+            "np.linspace(start, t_end, n) rather than np.arange",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    if before:
+        warnings.warn(
+            f"`save.grid`: {before} of {g.size} points lie before t0 = {t0!r} (the first at "
+            f"{float(g[0])!r}): no run reaches them, so their values (and a max_distance over the "
+            "grid) are NaN",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def check_progress(progress: object) -> Callable[[float], object] | None:

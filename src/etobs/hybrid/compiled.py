@@ -25,7 +25,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
-from etobs.hybrid.checks import check_log_columns, check_progress, check_sizes, span
+from etobs.hybrid.checks import check_log_columns, check_progress, check_sizes, span, warn_unreached_grid
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.solution import (
     GridMax,
@@ -262,6 +262,7 @@ def solve_compiled(
     P = _params(params, system.n_params, B)
     opts = options or SolverOptions()
     save = save or SaveAt()
+    warn_unreached_grid(save.grid, t0, t_end)
     grid = np.empty(0) if save.grid is None else np.array(save.grid, dtype=float, order="C")
     dist = save.distance_pairs(system.n)
     out = _Buffers(B, system.n, grid.shape[0], reduce=dist.shape[0] > 0)

@@ -21,7 +21,7 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.errors import InputTypeError, ModelError
-from etobs.hybrid.checks import check_progress, span
+from etobs.hybrid.checks import check_progress, span, warn_unreached_grid
 from etobs.hybrid.options import SaveAt, SolverOptions
 from etobs.hybrid.peaks import peak_probes
 from etobs.hybrid.recorder import Recorder
@@ -108,6 +108,7 @@ def solve_reference(
     progress = check_progress(progress)
     opts = options or SolverOptions()
     save = save or SaveAt()
+    warn_unreached_grid(save.grid, t0, t_end)
     dist = save.distance_pairs(system.n)
     B = X.shape[0]
     rec = Recorder(B, system.n, save, t0, system.log_columns)
