@@ -58,22 +58,59 @@ def test_a_pool_a_dead_worker_broke_is_replaced_and_its_calls_still_finish(tiny)
         new.shutdown()
 
 
-@pytest.mark.parametrize(
-    ("how", "calls"), [({"executor": "serial"}, 0), ({"executor": "process", "workers": 1}, 1)]
-)
-def test_the_drivers_own_work_runs_once_while_workers_compute(tiny, how, calls):
-    """``while_running``: once on a pool (after the chunks are handed over), never serially."""
+@pytest.fixture(params=["serial", "fresh pool", "kept pool", "broken pool", "dask"])
+def executor(request):
+    """Each way ``execute`` runs chunks, with how many times it calls ``while_running``."""
+    if request.param == "serial":
+        yield {"executor": "serial"}, 0
+    elif request.param == "fresh pool":
+        yield {"executor": "process", "workers": 1}, 1
+    elif request.param in ("kept pool", "broken pool"):
+        pool = process_pool(1)
+        if request.param == "broken pool":  # its worker died: the chunks rerun on fresh pools
+            with pytest.raises(BrokenProcessPool):
+                pool.submit(os._exit, 3).result()
+        try:
+            yield {"executor": "process", "workers": 1, "pool": pool}, 1
+        finally:
+            pool.shutdown()
+    else:
+        distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
+        from tests.conftest import local_cluster
+
+        with local_cluster(2) as cluster, distributed.Client(cluster) as client:
+            yield {"executor": "dask", "client": client}, 1
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_the_drivers_own_work_runs_once_while_workers_compute(tiny, executor, fails):
+    """``while_running``: once with workers (after the chunks are handed over), never serially;
+    if it raises, every chunk is still reported, then its exception is raised."""
+    how, calls = executor
     said = []
     got = {}
-    execute(
-        tasks(tiny),
-        type(tiny),
-        tiny.raw,
-        lambda t, r: got.setdefault(t.group, r),
-        lambda t, m: pytest.fail(m),
-        while_running=lambda: said.append(len(got)),
-        **how,
-    )
+
+    def own_work():
+        said.append(len(got))
+        if fails:
+            raise OSError("disk full")
+
+    def run():
+        execute(
+            tasks(tiny),
+            type(tiny),
+            tiny.raw,
+            lambda t, r: got.setdefault(t.group, r),
+            lambda t, m: pytest.fail(m),
+            while_running=own_work,
+            **how,
+        )
+
+    if fails and calls:
+        with pytest.raises(OSError, match="disk full"):
+            run()
+    else:
+        run()
     assert len(said) == calls
     assert sorted(got) == list(range(tiny.n_groups))  # every chunk reported all the same
 

@@ -11,6 +11,7 @@ import pytest
 
 from etobs.errors import InputError
 from etobs.hybrid import BatchedSystem, HybridSystem, SaveAt, SolverOptions, Status, solve
+from etobs.hybrid.options import step_grid
 
 from .systems import (
     G,
@@ -327,8 +328,9 @@ def test_grid_points_past_t_end_are_said_and_nan_and_t_end_itself_is_reached(bac
     past = [1.0, np.nextafter(2.0, 3.0)]
     with pytest.warns(
         RuntimeWarning, match=r"1 of 2 points lie after t_end = 2.0 \(the last at 2.0000000000000004"
-    ):
+    ) as said:
         sol = solve(*args, save=SaveAt(steps=False, grid=past, max_distance=pairs), backend=backend)
+    assert [w.filename for w in said] == [__file__]  # the caller's line, to filter by module
     assert np.isnan(sol.grid_max.value[0])
     with pytest.warns(RuntimeWarning, match=r"np.linspace\(start, t_end, n\) rather than np.arange"):
         kept = solve(*args, save=SaveAt(steps=False, grid=past), backend=backend)
@@ -610,3 +612,13 @@ def test_entries_from_n_flow_on_are_constant_on_the_engine_or_the_run_says_why()
     np.testing.assert_array_equal(sol.x_final[0], [1.0, 0.0])  # no step was taken
     ref = solve(broken, [1.0, 0.0], (0.0, 1.0), backend="scipy")
     np.testing.assert_allclose(ref.x_final[0], [np.exp(-1.0), 1.0], rtol=1e-9)
+
+
+@pytest.mark.parametrize("end", [0.7, 3.3, 30.0])
+@pytest.mark.parametrize("step", [1e-3, 1e-2, 0.1])
+def test_step_grids_end_at_or_before_their_end_and_miss_no_step(end, step):
+    """``np.arange(0, end + step / 2, step)`` ends a rounding error past 0.7 and 3.3: left out."""
+    g = step_grid(0.0, end, step)
+    full = np.arange(0.0, end + step / 2, step)
+    assert g[-1] <= end and np.array_equal(g, full[: g.size])
+    assert full.size - g.size == int(full[-1] > end)  # only a point past the end is dropped

@@ -24,6 +24,7 @@ from etobs.estimation import (
 from etobs.examples import X0_PAPER, robot_arm
 from etobs.experiments.common import MAX_GRID_POINTS
 from etobs.hybrid import SaveAt, SolverOptions
+from etobs.hybrid.options import step_grid
 
 #: The paper's measured minimum inter-event times (section 8), sensor 1 and sensor 2.
 PAPER_MIN_INTER_EVENT = (0.201, 0.112)
@@ -107,7 +108,7 @@ def run_robot_arm(args: argparse.Namespace) -> int:
     if lo > hi:
         raise InputError(f"--window {lo:g},{hi:g}: its start lies after its end")
     problem = robot_arm(noise=not args.no_noise, disturbance=not args.no_disturbance)
-    grid = np.arange(0.0, args.t_end + GRID_STEP / 2, GRID_STEP)
+    grid = step_grid(0.0, args.t_end, GRID_STEP)
     options = SolverOptions(rtol=args.rtol, atol=args.rtol)
     result = simulate(
         problem,

@@ -12,7 +12,7 @@ from etobs import _validate as v
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.estimation.simulate import simulate
-from etobs.hybrid.options import SaveAt, SolverOptions
+from etobs.hybrid.options import SaveAt, SolverOptions, step_grid
 
 
 def estimate_output_rate(
@@ -54,7 +54,7 @@ def estimate_output_rate(
     """
     v.real("t_end", t_end, lower=0.0, lower_open=True)
     v.real("grid_step", grid_step, lower=0.0, lower_open=True)
-    grid = np.arange(0.0, t_end + grid_step / 2, grid_step)
+    grid = step_grid(0.0, t_end, grid_step)
     res = simulate(
         problem, x0, t_end, options=options, save=SaveAt(steps=False, grid=grid), progress=progress
     )

@@ -385,8 +385,9 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("")
     # compiled as a function of its own for ``est``: numba inlines a function into the
     # caller's IR, where it drops writes into an array made by carray that nothing reads
-    # after them (a jump's last write into q was lost); inlined into ``est_lanes``' loop,
-    # which writes only into arrays read after the loop (checked by lane_form_agrees)
+    # after them (a jump's last write into q was lost); the lane forms inline only FLOW or
+    # GUARD into their loops, which write only into arrays read after the loop (checked
+    # by etobs.estimation._lane_probe.LaneProbe.agrees)
     c.line("BODY = jit(body)")
     c.line("")
     # two C functions (:func:`etobs.compile.functions.c_signature`) of the one body: the

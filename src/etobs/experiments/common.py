@@ -28,7 +28,7 @@ from etobs._validate import shown
 from etobs.errors import EtobsError
 from etobs.estimation.problem import EstimationProblem
 from etobs.hybrid.checks import check_backend
-from etobs.hybrid.options import SolverOptions
+from etobs.hybrid.options import SolverOptions, step_grid
 
 #: Keys of ``[solver]``: every field of :class:`SolverOptions` (written once, there).
 _SOLVER_KEYS = {f.name for f in fields(SolverOptions) if f.init}
@@ -96,8 +96,7 @@ class Metrics:
         horizon when the window ends at ``t_end``.
         """
         lo, hi = self.error_window
-        g = np.arange(lo, hi + self.error_grid_step / 2, self.error_grid_step)
-        return g[g <= hi]
+        return step_grid(lo, hi, self.error_grid_step)
 
 
 @dataclass(frozen=True, kw_only=True)

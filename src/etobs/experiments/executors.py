@@ -64,18 +64,30 @@ def execute(
     ``while_running`` is called once in this thread once the chunks are handed to
     workers (a process pool or Dask), so that the driver's own set-up for afterwards
     (importing the table writers, say) overlaps them; the serial executor never calls it.
+    An exception it raises is raised again once every chunk is reported (none is lost).
     """
     check_execution(executor, workers)
     if not tasks:
         return
     job = (kind, raw_spec)
-    started = while_running or _nothing
+    raised: list[Exception] = []
+
+    def started() -> None:
+        if while_running is None or raised:
+            return
+        try:
+            while_running()
+        except Exception as exc:  # raised below, once the chunks are in
+            raised.append(exc)
+
     if executor == "serial":
         _serial(tasks, job, on_done, on_error)
     elif executor == "process":
         _process(tasks, job, on_done, on_error, workers, pool, started)
     else:
         _dask(tasks, job, on_done, on_error, scheduler, client, started)
+    if raised:
+        raise raised[0]
 
 
 def _nothing() -> None:
@@ -153,6 +165,7 @@ def _process(
                 futures[pool.submit(run_task, *job, t)] = t
         except BrokenProcessPool:  # a worker died: every chunk goes the lost chunks' way below
             lost = list(tasks)
+            started()
         else:
             started()
             lost = _collect(futures, on_done, on_error)

@@ -7,8 +7,11 @@ check their arguments here, below all of them, so that none imports the front do
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 from collections.abc import Callable
+from types import FrameType
 from typing import Any
 
 import numpy as np
@@ -76,7 +79,7 @@ def warn_unreached_grid(grid: Any, t0: float, t_end: float) -> None:
             "(and a max_distance over the grid) are NaN; end the grid at t_end, e.g. "
             "np.linspace(start, t_end, n) rather than np.arange",
             RuntimeWarning,
-            stacklevel=3,
+            stacklevel=_callers_level(),
         )
     if before:
         warnings.warn(
@@ -84,8 +87,22 @@ def warn_unreached_grid(grid: Any, t0: float, t_end: float) -> None:
             f"{float(g[0])!r}): no run reaches them, so their values (and a max_distance over the "
             "grid) are NaN",
             RuntimeWarning,
-            stacklevel=3,
+            stacklevel=_callers_level(),
         )
+
+
+def _callers_level() -> int:
+    """``stacklevel`` of the first frame outside etobs, for a warning the caller can filter by module.
+
+    ``warn_unreached_grid`` is reached through ``solve``, ``simulate``, sweeps and the design
+    tools, each at its own depth below the user's call.
+    """
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+    frame: FrameType | None = sys._getframe(1)  # the frame that calls warnings.warn: level 1
+    level = 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def check_progress(progress: object) -> Callable[[float], object] | None:

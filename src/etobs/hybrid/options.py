@@ -102,6 +102,17 @@ class SolverOptions:
         v.real("event_xtol", self.event_xtol, lower=0.0, lower_open=True)
 
 
+def step_grid(start: float, end: float, step: float) -> np.ndarray:
+    """The times ``start + k step`` up to ``end``, for a ``SaveAt`` grid.
+
+    A last point past ``end`` by rounding is left out: ``np.arange(20, 30 + 0.0005,
+    0.001)`` ends 1.2e-11 above 30, a point a run ending at 30 never reaches (its value
+    NaN, said with a warning by the solvers).
+    """
+    g = np.arange(start, end + step / 2, step)
+    return g[g <= end]
+
+
 @dataclass(frozen=True)
 class SaveAt:
     """What a solve keeps of each run.
