@@ -14,8 +14,10 @@ def tasks(spec):
     return [Task(key="k", group=g, runs=(0, 1)) for g in range(spec.n_groups)]
 
 
-def collect(spec, **how):
-    got, failed = {}, []
+def collect(spec, got=None, **how):
+    """Each group's records, reported into ``got`` (a new dict by default) as chunks finish."""
+    got = {} if got is None else got
+    failed = []
     execute(
         tasks(spec),
         type(spec),
@@ -96,15 +98,7 @@ def test_the_drivers_own_work_runs_once_while_workers_compute(tiny, executor, fa
             raise OSError("disk full")
 
     def run():
-        execute(
-            tasks(tiny),
-            type(tiny),
-            tiny.raw,
-            lambda t, r: got.setdefault(t.group, r),
-            lambda t, m: pytest.fail(m),
-            while_running=own_work,
-            **how,
-        )
+        collect(tiny, got, while_running=own_work, **how)
 
     if fails and calls:
         with pytest.raises(OSError, match="disk full"):
