@@ -40,6 +40,7 @@ from etobs.model import Plant as Plant
 from etobs.model import Power as Power
 from etobs.model import Quadratic as Quadratic
 from etobs.model import RelativeRule as RelativeRule
+from etobs.model import Sampled as Sampled
 from etobs.model import Sinusoid as Sinusoid
 from etobs.model import StaticRule as StaticRule
 from etobs.model import TriggerRule as TriggerRule

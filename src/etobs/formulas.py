@@ -30,6 +30,7 @@ other name one of the kind's numbers.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -468,34 +469,114 @@ _EVALUATORS: dict[
 # ---- integration over a sampling period ----------------------------------------------
 
 
-def rk4_step(f: Callable[[float, R], R], t: float, y: R, h: float) -> R:
-    """One classical Runge--Kutta step of ``y' = f(t, y)`` from ``(t, y)``: ``y(t + h)``.
+def norm(values: Any) -> float:
+    """``|v|``: the square root of the sum of squares, added in order from ``0.0``.
+
+    A sampled node's norm (the sensor node's, the simulator's and the generated C's: the
+    engine's model sums the same way). Not :func:`sum`, which compensates its rounding
+    from Python 3.12 on.
+    """
+    acc = 0.0
+    for x in values:
+        acc += x * x
+    return math.sqrt(acc)
+
+
+def rk4_stepper(f: Callable[..., Any]) -> Callable[..., Any]:
+    """The classical Runge--Kutta step of ``y' = f(t, y, *args)``: ``step(t, y, h, *args) = y(t + h)``.
 
     ``y`` is a float or an array; the one fixed-step integrator of etobs (the sensor's
-    filter, the observer service).
+    filter, :func:`eta_period`; the observer service, :func:`rk4_step`). A closure over
+    ``f``, so that numba compiles it with ``f`` a constant.
     """
-    k1 = f(t, y)
-    k2 = f(t + h / 2, y + h / 2 * k1)
-    k3 = f(t + h / 2, y + h / 2 * k2)
-    k4 = f(t + h, y + h * k3)
-    return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    def step(t: float, y: Any, h: float, *args: Any) -> Any:
+        k1 = f(t, y, *args)
+        k2 = f(t + h / 2, y + h / 2 * k1, *args)
+        k3 = f(t + h / 2, y + h / 2 * k2, *args)
+        k4 = f(t + h, y + h * k3, *args)
+        return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    return step
 
 
-def eta_after_period(eta: float, flow: Callable[[float], float], period: float, rate: float | None) -> float:
-    """``eta`` after one sampling period of ``eta' = flow(eta)``, the measurement held.
+def rk4_step(f: Callable[[float, R], R], t: float, y: R, h: float) -> R:
+    """One classical Runge--Kutta step of ``y' = f(t, y)`` from ``(t, y)``: ``y(t + h)``."""
+    out: R = rk4_stepper(f)(t, y, h)
+    return out
 
-    When ``flow(eta) = -rate eta + flow(0)`` (a linear decay, ``rate`` given), exact:
-    ``exp(-rate T) eta + flow(0) (1 - exp(-rate T)) / rate``. Otherwise 20 classical
-    Runge--Kutta substeps (local error ``O((T/20)^5)``), with ``eta`` kept ``>= 0``.
+
+#: Runge--Kutta substeps per sampling period of a filter whose decay is not linear.
+ETA_SUBSTEPS = 20
+
+
+@functools.cache
+def eta_period(decay: KKind) -> Callable[[float, float, float, float, float], float]:
+    """``eta`` after one sampling period of ``eta' = drive - K(eta)``, ``K`` of kind ``decay``.
+
+    The sampled rule's filter (eq. (14) with ``gamma(|e|)`` held over the period, so that
+    ``drive = c gamma(|e_k|)`` is constant): ``(eta, drive, k1, k2, period) -> eta_{k+1}``
+    with ``k1, k2`` the numbers of ``K``. The one implementation of the discretization,
+    run as is by the sensor node (:mod:`etobs.runtime.sampled_rule`) and the reference,
+    compiled into the engine's model:
+
+    * ``K(s) = a s`` (:data:`LINEAR`): exact,
+      ``exp(-a T) eta + drive (1 - exp(-a T)) / a``;
+    * otherwise :data:`ETA_SUBSTEPS` classical Runge--Kutta substeps of
+      ``drive - K(max(eta, 0))`` (local error ``O((T/20)^5)``), ``eta`` kept ``>= 0``.
+
+    A function per kind (cached), with ``K`` a constant of it, so that numba compiles it
+    without function arguments.
     """
-    if rate is not None:
-        decay = math.exp(-rate * period)
-        return decay * eta + flow(0.0) * (1.0 - decay) / rate
-    h = period / 20
+    if decay is LINEAR:
 
-    def f(t: float, s: float) -> float:
-        return flow(max(s, 0.0))
+        def eta_exact(eta: float, drive: float, k1: float, k2: float, period: float) -> float:
+            d = math.exp(-k1 * period)
+            return d * eta + drive * (1.0 - d) / k1
 
-    for k in range(20):
-        eta = rk4_step(f, k * h, eta, h)
-    return max(eta, 0.0)
+        return eta_exact
+    K = decay.value
+
+    def rate(t: float, s: float, drive: float, k1: float, k2: float) -> float:
+        return drive - K(k1, k2, max(s, 0.0))
+
+    step = rk4_stepper(rate)
+
+    def eta_substeps(eta: float, drive: float, k1: float, k2: float, period: float) -> float:
+        h = period / ETA_SUBSTEPS
+        for k in range(ETA_SUBSTEPS):
+            eta = step(k * h, eta, h, drive, k1, k2)
+        return max(eta, 0.0)
+
+    return eta_substeps
+
+
+def sample_decision(
+    kind: RuleKind,
+    rule: Any,
+    e: float,
+    y: float | None,
+    s: float,
+    period: float,
+    decay: tuple[KKind, float, float],
+) -> tuple[bool, float]:
+    """Whether a node of ``kind`` sends at a sample, and its filter state at the next sample.
+
+    The sampled rule (eq. (14)--(15) at a sampling period): send when the trigger is
+    ``>= 0`` at ``(|e_k|, |y_k|, eta_k)``; on sending ``eta <- reset(eta)`` and ``|e| = 0``;
+    then ``eta`` over the period with ``|e|`` held (:func:`eta_period`; ``decay`` is the
+    kind's decay K-function and its numbers). ``rule`` is what :func:`evaluator` reads.
+    The one implementation for the sensor node and the simulator's reference; the
+    engine's model and the generated C code follow these steps on the same formulas
+    (and are checked against it bit for bit).
+    """
+    fire = float(evaluator(kind.trigger, kind.constants)(rule, e, y, s)) >= 0.0
+    if kind.state != "eta":
+        return fire, s
+    assert kind.flow is not None and kind.reset is not None  # an eta state has both
+    if fire:
+        s = float(evaluator(kind.reset, kind.constants)(rule, e, y, s))  # eq. (14), jump
+        e = 0.0
+    drive = float(evaluator(kind.flow, kind.constants)(rule, e, y, 0.0))  # -K(0) + F(|e|) = F(|e|)
+    dk, k1, k2 = decay
+    return fire, eta_period(dk)(s, drive, k1, k2, period)

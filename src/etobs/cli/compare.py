@@ -23,7 +23,7 @@ from etobs.experiments.compare_spec import CompareSpec, parse_compare_spec
 from etobs.experiments.store import atomic_write
 from etobs.experiments.tables import not_completed
 
-PACKAGED = {"robot_arm": "robot_arm_compare.toml"}
+PACKAGED = {"robot_arm": "robot_arm_compare.toml", "robot_arm_sampled": "robot_arm_sampled.toml"}
 
 
 def add_parser(sub: Any) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from etobs.design.rates import RateEstimate
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.model.rules import DynamicRule, StaticRule
+from etobs.model.sampled import Sampled
 from etobs.model.signals import Constant, Signal, Sinusoid, Zero
 
 
@@ -224,7 +226,8 @@ def rules(problem: EstimationProblem) -> list[Any]:
     """
     rules = []
     for i, nd in enumerate(problem.nodes):
-        kind = type(nd.rule)
+        rule = nd.rule.rule if type(nd.rule) is Sampled else nd.rule  # the rule it samples: see sampled()
+        kind = type(rule)
         if kind not in (DynamicRule, StaticRule):
             sub = [b.__name__ for b in (DynamicRule, StaticRule) if isinstance(nd.rule, b)]
             what = f"a subclass of {sub[0]}, which may change the rule" if sub else "another rule"
@@ -232,5 +235,16 @@ def rules(problem: EstimationProblem) -> list[Any]:
                 f"the theorems cover the paper's rule, DynamicRule or StaticRule itself; node {i} "
                 f"({nd.name!r}) has a {kind.__name__} ({what}): no certificate is given for it"
             )
-        rules.append(nd.rule)
+        rules.append(rule)
     return rules
+
+
+def continuous(problem: EstimationProblem) -> EstimationProblem:
+    """``problem`` with each sampled node's rule in place of its :class:`~etobs.model.Sampled` one."""
+    nodes = tuple(replace(nd, rule=nd.rule.rule) if type(nd.rule) is Sampled else nd for nd in problem.nodes)
+    return replace(problem, nodes=nodes)
+
+
+def sampled(problem: EstimationProblem) -> list[float | None]:
+    """Each node's sampling period (:class:`~etobs.model.Sampled`), ``None`` for a continuous rule."""
+    return [nd.rule.period if type(nd.rule) is Sampled else None for nd in problem.nodes]

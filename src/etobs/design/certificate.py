@@ -307,6 +307,12 @@ def certify(
         raise InputError(f"`problem` must be an EstimationProblem; got {type(problem).__name__}")
     _b.covered(problem)
     rules = _b.rules(problem)
+    periods = _b.sampled(problem)
+    if any(T is not None for T in periods):
+        return _sampled(
+            certify(_b.continuous(problem), iss, d=d, a_U=a_U, E=E, noise=noise, disturbance=disturbance),
+            periods,
+        )
     N = len(rules)
     ds = None if d is None else [v.real(f"d[{i}]", di, lower=0.0, lower_open=True) for i, di in enumerate(d)]
     if ds is not None and len(ds) != N:
@@ -380,6 +386,42 @@ def certify(
     out = replace(out, conditions=tuple(conds), notes=(*out.notes, *notes, *([note] if note else [])))
     out = _with_iss(out, rules, iss, a_U, bound, ms)
     return replace(out, disturbance=bound, assumptions=tuple(assumed))
+
+
+def _sampled(cert: Certificate, periods: list[float | None]) -> Certificate:
+    """The certificate of the continuous rules, as far as it holds for the nodes that sample them.
+
+    Checked: the continuous rule's conditions. What carries over: a sampled node sends
+    only at samples, so its inter-event time is at least ``T_i``; and only when
+    ``gamma_i(|e_i|) >= eps_i`` at a sample (its filter stays ``>= 0``), which after a
+    transmission (``e_i = 0``) takes at least Theorem 4's ``tau_i`` when ``E`` bounds the
+    output's rate: ``tau_i`` becomes ``max(T_i, tau_i)``. What does not: Theorem 1's and
+    2's decrease of ``U`` (with ``nu``, ``mu``) and the error bound assume that
+    ``gamma_i(|e_i|)`` never exceeds the threshold, which between samples it may (by up
+    to ``gamma_i`` of ``E_i T_i`` more gap); they are left out (``nan``), said in a note.
+    """
+    nodes = tuple(
+        nd if T is None else replace(nd, tau=max(T, nd.tau) if math.isfinite(nd.tau) else T)
+        for nd, T in zip(cert.nodes, periods, strict=True)
+    )
+    which = ", ".join(f"node {i} at T = {T:g} s" for i, T in enumerate(periods) if T is not None)
+    note = (
+        f"sampled rules ({which}): the conditions are the continuous rules'; for a sampled node tau_i is "
+        "max(T_i, tau_i) (it sends only at samples, and only once gamma_i(|e_i|) >= eps_i); Theorem 1's and "
+        "2's decrease of U (nu, mu) and the error bound are not proven for sampled rules (between samples "
+        "gamma_i(|e_i|) may exceed the threshold) and are left out"
+    )
+    return replace(
+        cert,
+        nodes=nodes,
+        nu=math.nan,
+        nu_inf=math.nan,
+        a_U=math.nan,
+        mu=math.nan,
+        error_bound=math.nan,
+        d_U=(),
+        notes=(*cert.notes, note),
+    )
 
 
 #: Stated on every certificate: the theorems speak of complete solutions (Theorem 3 proves

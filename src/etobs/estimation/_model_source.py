@@ -67,6 +67,9 @@ def _helpers() -> dict[str, Callable[..., Any]]:
 
     out: dict[str, Callable[..., Any]] = {f"K_{k.name.upper()}": k.value for k in fm.K_KINDS.values()}
     out["SIN"] = vecmath.sin  # vectorizes in the lane form (a libm call does not)
+    for k in fm.K_KINDS.values():  # a sampled filter's period (etobs.formulas.eta_period)
+        if k is not fm.CONSTANT:
+            out[f"ETA_PERIOD_{k.name.upper()}"] = fm.eta_period(k)
     for kind in fm.RULE_KINDS.values():
         for what in ("trigger", "flow", "reset"):
             formula = getattr(kind, what)
@@ -159,6 +162,12 @@ class _Node:
     s0: int  # index of its rule state in q (-1: none)
     p0: int  # offset of its numbers in p
     kforms: tuple[tuple[str, str | None], ...]  # per slot of its kind: (K kind's name or "", user global)
+    sampled: bool = False  # a Sampled rule: its state ends with the next sample's index and the mark
+
+    @property
+    def sk(self) -> int:
+        """Index in ``q`` of a sampled node's next sample index ``k`` (its mark follows)."""
+        return self.s0 if self.form.kind.state == "none" else self.s0 + 1
 
     @property
     def size(self) -> int:
@@ -239,7 +248,7 @@ def _groups(nodes: list[_Node]) -> list[_Group]:
     """The nodes grouped by kind, in the order of their first node."""
     keyed: dict[tuple[Any, ...], list[_Node]] = {}
     for nd in nodes:
-        keyed.setdefault((nd.form.kind.name, nd.kforms, nd.size), []).append(nd)
+        keyed.setdefault((nd.form.kind.name, nd.kforms, nd.size, nd.sampled), []).append(nd)
     return [_Group(g, tuple(members)) for g, members in enumerate(keyed.values())]
 
 
@@ -347,12 +356,17 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     jp = [next(grp.nodes.index(nd) for grp in groups if nd in grp.nodes) for nd in nodes]
     c.line(f"JG = np.array({jg!r}, dtype=np.int64)")
     c.line(f"JP = np.array({jp!r}, dtype=np.int64)")
+    samples = [nd for nd in nodes if nd.sampled]  # sample rule m is samples[m]'s
+    if samples:
+        c.line(f"SG = np.array({[jg[nd.index] for nd in samples]!r}, dtype=np.int64)")
+        c.line(f"SP = np.array({[jp[nd.index] for nd in samples]!r}, dtype=np.int64)")
     if network >= 0:
         c.lines(_network_tables(lay.channels, network))
     c.line("")
     # the model of one run, on 1-D arrays: the flow (k = -1) into ``out``, the guard (k = -2)
     # into ``out``, the jump of rule k >= 0 into ``q``; it returns a status
-    rows = max(lay.n, len(nodes) * (2 if network >= 0 else 1))
+    n_rules = len(problem.rule_names)  # deliveries, transmissions, samples
+    rows = max(lay.n, n_rules)
     # the flow and the guard are functions of their own, so that the lane form inlines
     # only them: inlining the whole body (its jumps too) twice was two thirds of the
     # lane form's compile (numba copies the IR it inlines)
@@ -366,7 +380,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("def guard(t, q, p, work, out):")
     c.indent()
     c.line("g = out")
-    _guard(c, at, groups)
+    _guard(c, at, groups, samples)
     c.line("return 1")
     c.dedent()
     c.line("")
@@ -379,7 +393,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("    return FLOW(t, q, p, work, out)")
     c.line("if k == -2:")
     c.line("    return GUARD(t, q, p, work, out)")
-    _jump(c, at, groups)
+    _jump(c, at, groups, samples)
     c.line("return 1")
     c.dedent()
     c.line("")
@@ -402,7 +416,7 @@ def model_source(problem: Any, forms: list[EngineForm]) -> ModelSource:
     c.line("")
     src.lanes = _lane_form_fits(src.n_work + 1, rows)
     if src.lanes:
-        _lanes(c, src, lay.n, lay.n_flow or lay.n, rows, len(nodes) * (2 if network >= 0 else 1))
+        _lanes(c, src, lay.n, lay.n_flow or lay.n, rows, n_rules)
     src.text = c.text()
     return src
 
@@ -514,7 +528,9 @@ def _node(src: ModelSource, c: int, ch: Any, form: EngineForm, w: dict[str, int]
         sw = tuple(w["innov"] + k for k in index) if innovation else mw
     s0 = ch.rule_state.start if ch.rule_state.stop > ch.rule_state.start else -1
     sq = tuple(int(a) for a in ch.sent)
-    return _Node(c, form, sq, sw, mw, s0, src.put(numbers), tuple(kforms))
+    if form.sampled is not None:
+        numbers += list(form.sampled)  # period, phase
+    return _Node(c, form, sq, sw, mw, s0, src.put(numbers), tuple(kforms), form.sampled is not None)
 
 
 def _prelude(c: _Code, at: _Where, flow: bool) -> None:
@@ -575,7 +591,7 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
     _prelude(c, at, flow=True)
     for grp in groups:
         kind = grp.first.form.kind
-        if kind.flow is None:
+        if kind.flow is None or grp.first.sampled:  # a sampled filter moves at samples only
             continue
         c.lines(grp.loop())
         c.indent()
@@ -583,11 +599,14 @@ def _flow(c: _Code, at: _Where, groups: list[_Group], n_flow: int) -> None:
         c.dedent()
 
 
-def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
+def _guard(c: _Code, at: _Where, groups: list[_Group], samples: list[_Node]) -> None:
     """Every node's trigger function (eq. (15), (45), (54)): the node sends when ``g_i >= 0``.
 
     With a network the deliveries come first: ``g[c]`` is zero when a packet of node
     ``c`` arrives, and the nodes' triggers follow (:mod:`etobs.estimation.assembly`).
+    A sampled node's trigger is its mark (``due - 1/2``), and its sample's guard,
+    ``t - t_k`` with ``t_k = phase + k T``, comes after every node's
+    (:mod:`etobs.model.sampled`).
     """
     _prelude(c, at, flow=False)
     off = 0
@@ -600,15 +619,22 @@ def _guard(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.lines(grp.loop())
         c.indent()
         gi = f"g[{off} + i]" if off else "g[i]"
-        c.line(f"{gi} = {_apply(c, grp, kind, 'trigger')}")  # e.g. eq. (15), (45), (54)
+        if grp.first.sampled:
+            c.line(f"{gi} = q[s0 + {grp.first.sk - grp.first.s0 + 1}] - 0.5  # due at this sample")
+        else:
+            c.line(f"{gi} = {_apply(c, grp, kind, 'trigger')}")  # e.g. eq. (15), (45), (54)
         c.dedent()
+    for m, nd in enumerate(samples):
+        tp = len(nd.form.kind.numbers) + 2 * len(nd.form.kind.slots)  # its period, then its phase
+        c.line(f"g[{off + at.n_ch + m}] = t - (p[{nd.p0 + tp + 1}] + q[{nd.sk}] * p[{nd.p0 + tp}])")
 
 
-def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
+def _jump(c: _Code, at: _Where, groups: list[_Group], samples: list[_Node]) -> None:
     """Node ``k`` sends its current value (eq. (22): ``e_k+ = 0``) and resets its own rule state.
 
     With a network, rules ``0 .. C-1`` deliver node ``k``'s earliest packet, and rule
-    ``C + c`` is node ``c``'s transmission, whose packet then enters its link.
+    ``C + c`` is node ``c``'s transmission, whose packet then enters its link. The rules
+    after the transmissions are the sampled nodes' samples (:func:`_sample`).
     """
     if at.network >= 0:
         c.line(f"if k < {at.n_ch}:")
@@ -616,6 +642,12 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.line("    return 1")
         c.line(f"k = k - {at.n_ch}")
     _prelude(c, at, flow=False)
+    if samples:
+        c.line(f"if k >= {at.n_ch}:")
+        c.indent()
+        _sample(c, at, [grp for grp in groups if grp.first.sampled])
+        c.line("return 1")
+        c.dedent()
     c.line("gk = JG[k]")
     for grp in groups:
         c.line(f"{'if' if grp.index == 0 else 'elif'} gk == {grp.index}:")
@@ -624,7 +656,9 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.lines(grp.locals("jj"))
         c.lines(grp.send("jj"))
         kind = grp.first.form.kind
-        if kind.reset is not None:
+        if grp.first.sampled:  # its sample reset the filter: the mark is cleared
+            c.line(f"q[s0 + {grp.first.sk - grp.first.s0 + 1}] = 0.0")
+        elif kind.reset is not None:
             c.line(f"q[s0] = {_apply(c, grp, kind, 'reset')}")  # e.g. eq. (14)
         c.dedent()
     if at.network >= 0:
@@ -634,6 +668,50 @@ def _jump(c: _Code, at: _Where, groups: list[_Group]) -> None:
             f"NET_SEND(q, t, seed, int(q[{at.run}]), k, NM[k], NS[k], NH[k], NN[k], NC[k], "
             f"p[NP[k]:NP[k] + {LINK_WIDTH}])"
         )
+
+
+def _sample(c: _Code, at: _Where, groups: list[_Group]) -> None:
+    """The sample of sampled node ``SG/SP[k - C]``: :func:`etobs.formulas.sample_decision`, step by step.
+
+    Send when the trigger is ``>= 0`` at ``(|e_k|, |y_k|, eta_k)`` (the mark is set, the
+    transmission rule sends at this instant); then ``eta <- reset(eta)`` and ``|e| = 0``;
+    then ``eta`` over the period with ``|e|`` held (:func:`etobs.formulas.eta_period`);
+    and ``k <- k + 1``. The same formulas in the same order as the sensor node, so the
+    same bits (tested).
+    """
+    c.line(f"m = k - {at.n_ch}")
+    c.line("gs = SG[m]")
+    for idx, grp in enumerate(groups):
+        nd, kind = grp.first, grp.first.form.kind
+        dk = nd.sk - nd.s0  # the next sample's index, then the mark, after the rule's own state
+        tp = len(kind.numbers) + 2 * len(kind.slots)  # the period in the node's numbers
+        c.line(f"{'if' if idx == 0 else 'elif'} gs == {grp.index}:")
+        c.indent()
+        c.line("jj = SP[m]")
+        c.lines(grp.locals("jj"))
+        reads = set().union(*(f.reads for f in kind.formulas()))
+        given = {}
+        for arg, local in (("e", "e"), ("y", "ym")):
+            if arg in reads:  # once, before the decision (|e| is then held at 0 if it sends)
+                c.lines(grp.norm("jj", arg == "y", local))
+                given[arg] = local
+        c.line(f"tr = {_apply(c, grp, kind, 'trigger', given)}")  # eq. (15) at the sample
+        c.line(f"q[s0 + {dk}] = q[s0 + {dk}] + 1.0")
+        c.line("if tr >= 0.0:")
+        c.indent()
+        c.line(f"q[s0 + {dk + 1}] = 1.0")
+        if kind.state == "eta":
+            assert kind.reset is not None and kind.decay is not None
+            c.line(f"q[s0] = {_apply(c, grp, kind, 'reset', given)}")  # eq. (14), jump
+            c.line("e = 0.0")
+        c.dedent()
+        if kind.state == "eta":
+            c.line(f"drive = {_apply(c, grp, kind, 'flow', {**given, 's': '0.0'})}")
+            j = [slot.name for slot in kind.slots].index(kind.decay or "")
+            kname, base = nd.kforms[j][0], len(kind.numbers) + 2 * j
+            k12 = f"p[r + {base}], p[r + {base + 1}]"
+            c.line(f"q[s0] = ETA_PERIOD_{kname.upper()}(q[s0], drive, {k12}, p[r + {tp}])")
+        c.dedent()
 
 
 class _Code:
@@ -709,17 +787,17 @@ def _ytilde(at: _Where) -> list[str]:
     return [*out, f"for ii in range({ny}):", f"    work[{wy} + ii] += work[{wm} + ii]"]
 
 
-def _apply(c: _Code, grp: _Group, kind: fm.RuleKind, what: str) -> str:
+def _apply(c: _Code, grp: _Group, kind: fm.RuleKind, what: str, given: dict[str, str] | None = None) -> str:
     """The call of ``kind``'s formula ``what`` for the group's node ``jj``; its arguments' lines into ``c``.
 
     Each argument of the formula (:class:`etobs.formulas.Formula`) becomes a local:
     ``|e_i|``, ``|ytilde_i|``, the rule state ``q[s0]``, a K-function's value or a number
-    of the node's block of ``p``.
+    of the node's block of ``p``; ``given`` names some of them (``{"s": "0.0"}``).
     """
     formula = getattr(kind, what)
     names = {n.name: i for i, n in enumerate(kind.numbers)}
     slots = {slot.name: i for i, slot in enumerate(kind.slots)}
-    done: dict[str, str] = {"s": "q[s0]"}
+    done: dict[str, str] = {"s": "q[s0]", **(given or {})}  # given: locals computed already, or values
 
     def local(arg: str) -> str:
         if arg in done:

@@ -8,7 +8,9 @@ packet whose arrival time has come (see :mod:`etobs.model.network`).
 Jump rules: ``0 .. C-1`` are the channels' transmissions. With a network the
 deliveries come first, ``0 .. C-1``, and the transmissions are ``C .. 2C-1``: at one
 instant the solver jumps in rule order, so a packet arriving when its node sends again
-leaves the link before the new one enters it.
+leaves the link before the new one enters it. The samples of the sampled nodes
+(:class:`~etobs.model.Sampled`) come last: a sample that fires marks its node's
+transmission due, which the solver then applies at the same instant.
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ class _Assembly:
         self.networked = pb.network is not None
         self.links = tuple(None if ch.link is None else ch.link.form() for ch in self.channels)
         self.u_held = [ch for ch in self.channels if ch.kind == "u"]
+        self.sampled = pb.sampled_channels
 
     # -- the signals every channel reads -------------------------------------------
     def _parts(
@@ -128,7 +131,10 @@ class _Assembly:
         yt, u, yhat = self._parts(t, q, need_yhat=self.innovation, need_u=bool(self.u_held))
         n_ch = len(self.channels)
         off = n_ch if self.networked else 0  # deliveries first (see the module docstring)
-        g = np.empty((q.shape[0], n_ch + off))
+        g = np.empty((q.shape[0], n_ch + off + len(self.sampled)))
+        for m, c in enumerate(self.sampled):  # the sampled nodes' samples last
+            ch = self.channels[c]
+            g[:, off + n_ch + m] = ch.rule.sample_guard(t, q[:, ch.rule_state])  # type: ignore[attr-defined]
         for c, ch in enumerate(self.channels):
             sig, meas = self._source(ch, yt, u, yhat)
             g[:, off + c] = self._trigger(ch, t, q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # (15), (54)
@@ -140,6 +146,8 @@ class _Assembly:
 
     def jump(self, k: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         n_ch = len(self.channels)
+        if k >= n_ch * (2 if self.networked else 1):
+            return self._sample(self.channels[self.sampled[k - n_ch * (2 if self.networked else 1)]], t, q)
         if not self.networked:
             return self._send(self.channels[k], k, t, q)
         if k < n_ch:
@@ -162,6 +170,14 @@ class _Assembly:
                 qn[r], t[r], self.pb.network.seed, int(q[r, self.lay.run]), c, ch.net.start,
                 ch.sent, ch.held, ch.size, ch.link.capacity, self.links[c],
             )  # fmt: skip
+        return qn
+
+    def _sample(self, ch: Channel, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """A sampled node's sample (:class:`~etobs.model.Sampled`): decide, advance the filter."""
+        yt, u, yhat = self._parts(t, q, need_yhat=self.innovation, need_u=bool(self.u_held))
+        sig, meas = self._source(ch, yt, u, yhat)
+        qn = q.copy()
+        qn[:, ch.rule_state] = ch.rule.sample(q[:, ch.sent] - sig, q[:, ch.rule_state], meas)  # type: ignore[attr-defined]
         return qn
 
     def _deliver(self, ch: Channel, t: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from etobs.model.network import Network
 from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
+from etobs.model.sampled import Sampled
 from etobs.model.signals import Signal, Sinusoid, as_signal
 
 
@@ -144,12 +145,18 @@ class EstimationProblem:
         """Names of the hybrid model's jump rules.
 
         The nodes' transmissions; with a network, after one delivery rule per node
-        (``"deliver <node>"``).
+        (``"deliver <node>"``); then the samples of the sampled nodes
+        (``"sample <node>"``, :class:`~etobs.model.Sampled`), in node order.
         """
         names = self.channel_names
         if self.network is not None:
             names = tuple(f"deliver {n}" for n in names) + names
-        return names
+        return names + tuple(f"sample {self.channel_names[c]}" for c in self.sampled_channels)
+
+    @property
+    def sampled_channels(self) -> tuple[int, ...]:
+        """The channels whose rule is :class:`~etobs.model.Sampled`, in order: sample rule ``m`` is theirs."""
+        return tuple(c for c, ch in enumerate(self.layout.channels) if isinstance(ch.rule, Sampled))
 
     @property
     def extended(self) -> bool:

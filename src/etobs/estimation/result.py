@@ -118,17 +118,19 @@ class EstimationResult:
         """Every transmission: ``(run, rule=node, t, j)`` rows sorted by run then ``j``.
 
         ``rule`` is the node: ``0 .. N-1`` the output nodes, then the input nodes
-        (section 7.3). With a network this counts packets *sent*, received or not.
+        (section 7.3). With a network this counts packets *sent*, received or not. The
+        samples of a :class:`~etobs.model.Sampled` node are jumps, not transmissions: not here.
         ``x`` holds, just after each jump, what every node has last sent (columns
         ``names``: ``sent_y<k>``, ``sent_u<k>``, node after node); the row's own node's
         columns are the value it sent, which ``to_pandas("transmissions")`` tabulates.
         """
         log = self._named_log()
-        if self.problem.network is None:
+        C = self.problem.n_channels
+        off = C if self.problem.network is not None else 0  # with a network, rules 0..C-1 deliver
+        if off == 0 and not self.problem.sampled_channels:
             return log
-        C = self.problem.n_channels  # with a network, rules 0..C-1 are the deliveries
-        keep = log.rule >= C
-        return replace(log[keep], rule=log.rule[keep] - C)
+        keep = (log.rule >= off) & (log.rule < off + C)  # the sampled nodes' samples follow
+        return replace(log[keep], rule=log.rule[keep] - off)
 
     @property
     def deliveries(self) -> JumpLog:
@@ -321,6 +323,36 @@ class EstimationResult:
         a = arcs[run]
         return self.trajectory(a.t, a.j, a.x)
 
+    def samples(self, run: int, node: int) -> tuple[np.ndarray, np.ndarray]:
+        """The samples sampled node ``node`` read in ``run``: times ``t_k`` and ``ytilde_i(t_k)``.
+
+        What a deployed node (:mod:`etobs.runtime.sensor`, the generated C module) fed these
+        values decides as the simulation did: the same samples send, bit for bit when
+        ``ytilde_i`` is computed alike (``h`` picks states, no noise ``m``). Read from the
+        arc at each of the node's samples (requires ``SaveAt(steps=True)``), with the
+        problem's ``h`` and ``m`` in numpy.
+
+        Returns
+        -------
+        t : ndarray, shape (K,)
+        y : ndarray, shape (K, n_y_i)
+
+        """
+        pb = self.problem
+        if not 0 <= node < pb.n_nodes or node not in pb.sampled_channels:
+            sampled = [c for c in pb.sampled_channels if c < pb.n_nodes]
+            raise InputError(f"`node` must be a sampled output node ({sampled}); got {node!r}")
+        a = self.arc(run)  # checks run and the arcs
+        arcs = self.solution.arcs
+        assert arcs is not None
+        log = self.solution.jumps
+        rule = len(pb.rule_names) - len(pb.sampled_channels) + pb.sampled_channels.index(node)
+        rows = (log.run == run) & (log.rule == rule)
+        after = np.searchsorted(arcs[run].j, log.j[rows] + 1, side="left")  # the state after the sample
+        t = a.t[after]
+        y = pb.ytilde(t, a.x[after])[:, list(pb.nodes[node].outputs)]
+        return t, y
+
     def on_grid(self) -> Trajectory:
         """States of every run on the save grid, arrays of shape ``(B, G, ...)``."""
         g = self.solution.grid
@@ -351,9 +383,9 @@ class EstimationResult:
             if pb.hold == "innovation":  # ybar holds ytilde - yhat as sent (Remark 3)
                 e = e + pb.calls().h(xhat)
         eta = np.full((flat.shape[0], pb.n_channels), np.nan)
-        for i, sl in enumerate(lay.rule):
-            if sl.stop > sl.start:
-                eta[:, i] = flat[:, sl.start]
+        for i, ch in enumerate(lay.channels):
+            if ch.rule.n_own:
+                eta[:, i] = flat[:, ch.rule_state.start]
         lead = q.shape[:-1]
 
         def shape(a: np.ndarray) -> np.ndarray:

@@ -36,6 +36,7 @@ from etobs.model.network import (
     UniformDelay,
 )
 from etobs.model.rules import KindRule, TriggerRule, rule_classes, send_on_delta
+from etobs.model.sampled import Sampled
 
 _T = TypeVar("_T")
 
@@ -77,6 +78,10 @@ RULE_KINDS: dict[str, tuple[str, ...]] = {
     "send_on_delta": ("delta",),
 }
 
+#: Keys of every rule entry that run its rule sampled (:class:`~etobs.model.Sampled`): the
+#: period and the phase of its samples, a number or one per node.
+SAMPLE_KEYS = ("sample_period", "sample_phase")
+
 #: What an entry's name and a rule's number expect, in a missing key's error.
 _NAME = "a non-empty string"
 _PER_NODE = "a number (every node) or a list of numbers (one per node)"
@@ -114,31 +119,39 @@ class RuleEntry:
         keys given. A kind without K-functions is built from the entry and its defaults.
         """
         p = {k: self.value(k, node, n_nodes) for k in self.params}
+        sample = {k: p.pop(k) for k in SAMPLE_KEYS if k in p}
         try:
-            if self.kind == "base":
-                return base
-            if self.kind == "send_on_delta":
-                return send_on_delta(p["delta"])
-            cls = RULE_CLASSES[self.kind]
-            if isinstance(base, cls):
-                return replace(base, **p)
-            lacking = [slot.name for slot in cls.kind.slots if not hasattr(base, slot.name)]
-            if lacking:
-                raise SpecError(
-                    f"`{self.where}`: kind {self.kind!r} takes `{'`, `'.join(lacking)}` from the base rule, "
-                    f"but node {node}'s {type(base).__name__} has none"
-                )
-            args: dict[str, Any] = {}
-            for f in fields(cls):
-                if f.name in p:
-                    args[f.name] = p[f.name]
-                elif hasattr(base, f.name) and _carries(cls):
-                    args[f.name] = getattr(base, f.name)
-            return cls(**args)  # the keys without a default are required by the parser
+            rule = self._made(node, p, base)
+            if not sample:
+                return rule
+            return Sampled(rule, period=sample["sample_period"], phase=sample.get("sample_phase", 0.0))
         except SpecError:
             raise
         except EtobsError as exc:
             raise SpecError(f"`{self.where}`, node {node}: {exc}") from exc
+
+    def _made(self, node: int, p: dict[str, float], base: TriggerRule) -> TriggerRule:
+        """The entry's rule for ``node`` from its numbers ``p`` (:meth:`make`), before sampling."""
+        if self.kind == "base":
+            return base
+        if self.kind == "send_on_delta":
+            return send_on_delta(p["delta"])
+        cls = RULE_CLASSES[self.kind]
+        if isinstance(base, cls):
+            return replace(base, **p)
+        lacking = [slot.name for slot in cls.kind.slots if not hasattr(base, slot.name)]
+        if lacking:
+            raise SpecError(
+                f"`{self.where}`: kind {self.kind!r} takes `{'`, `'.join(lacking)}` from the base rule, "
+                f"but node {node}'s {type(base).__name__} has none"
+            )
+        args: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name in p:
+                args[f.name] = p[f.name]
+            elif hasattr(base, f.name) and _carries(cls):
+                args[f.name] = getattr(base, f.name)
+        return cls(**args)  # the keys without a default are required by the parser
 
     def apply(self, base: EstimationProblem, network: Network | None) -> EstimationProblem:
         """The base problem with this rule on every output node, and ``network``."""
@@ -298,7 +311,11 @@ def _rule(where: str, table: Any) -> RuleEntry:
     if not isinstance(kind, str) or kind not in RULE_KINDS:
         raise SpecError(f"`{where}.kind` must be one of {', '.join(RULE_KINDS)}; got {shown(kind)}")
     required = {"name": _NAME, "kind": "a rule kind"} | {k: _PER_NODE for k in _required(kind)}
-    t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy"})
+    t = _keys(where, table, required, set(RULE_KINDS[kind]) | {"observer_copy", *SAMPLE_KEYS})
+    if "sample_phase" in t and "sample_period" not in t:
+        raise SpecError(
+            f"`{where}.sample_phase` needs `{where}.sample_period` (the rule is continuous without it)"
+        )
     copy = t.get("observer_copy", False)
     if not isinstance(copy, bool):
         raise SpecError(f"`{where}.observer_copy` must be true or false; got {shown(copy)}")

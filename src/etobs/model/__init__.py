@@ -19,6 +19,7 @@ from etobs.model.observer import Observer, luenberger
 from etobs.model.plant import Plant
 from etobs.model.python_control import python_control_plant
 from etobs.model.rules import DynamicRule, PeriodicRule, RelativeRule, StaticRule, TriggerRule, send_on_delta
+from etobs.model.sampled import Sampled
 from etobs.model.signals import Constant, FunctionSignal, Signal, Sinusoid, Zero
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "Power",
     "Quadratic",
     "RelativeRule",
+    "Sampled",
     "Signal",
     "Sinusoid",
     "StaticRule",

@@ -49,6 +49,7 @@ class EngineForm:
     kind: fm.RuleKind
     numbers: dict[str, float]
     kfunctions: dict[str, KFunction | float]
+    sampled: tuple[float, float] | None = None  # (period, phase) of a Sampled rule
 
 
 def _norm(e: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -72,6 +73,11 @@ class TriggerRule(ABC):
     @abstractmethod
     def n_state(self) -> int:
         """Size of the rule's internal state."""
+
+    @property
+    def n_own(self) -> int:
+        """Entries of the state that are the rule's filter or clock (the first ones; ``eta`` first)."""
+        return self.n_state
 
     @abstractmethod
     def initial_state(self) -> np.ndarray:
@@ -111,8 +117,9 @@ class TriggerRule(ABC):
 
 
 def engine_form_of(rule: TriggerRule) -> EngineForm | None:
-    """``rule.engine_form()`` when the rule is a kind of etobs, else ``None`` (:func:`registered`)."""
-    return rule.engine_form() if registered(rule) else None
+    """``rule.engine_form()`` for a kind of etobs or one sampled, else ``None`` (:func:`registered`)."""
+    sampled = type(rule).__dict__.get("samples_kind_rule") is True  # etobs.model.sampled.Sampled itself
+    return rule.engine_form() if registered(rule) or sampled else None
 
 
 def registered(rule: TriggerRule) -> bool:

@@ -15,7 +15,7 @@ exactly over one period:
     eta_{k+1} = exp(-a T) eta_k + c gamma(|e_k|) (1 - exp(-a T)) / a.
 
 Other ``alpha`` are integrated with 20 classical Runge--Kutta substeps per period (local
-error ``O((T/20)^5)``; :func:`etobs.formulas.eta_after_period`). Every kind of
+error ``O((T/20)^5)``; :func:`etobs.formulas.eta_period`). Every kind of
 :data:`etobs.formulas.RULE_KINDS` runs so (the generalized rule's ``alpha_check`` as
 ``alpha``); a clock counts samples. The formulas are those the simulator runs
 (:mod:`etobs.formulas`, standard library only). Against the continuous
@@ -89,10 +89,6 @@ def k_function(spec: Any, key: str, constant: bool = False) -> KFn:
     return kind, vals[0], vals[1] if len(vals) > 1 else 0.0
 
 
-def _norm(v: Sequence[float]) -> float:
-    return math.sqrt(sum(x * x for x in v))
-
-
 class SampledRule:
     """A node's rule at sampling period ``period``: :meth:`decide` once per sample.
 
@@ -144,10 +140,6 @@ class SampledRule:
             # fire at the sample of time `first`, then every `every` samples (as PeriodicRule)
             self.count = self.every - round(first / self.period) - 1
 
-    def _apply(self, formula: fm.Formula, e: float, y: float | None, s: float) -> float:
-        """The kind's ``formula`` at this sample (:func:`etobs.formulas.evaluator`)."""
-        return float(fm.evaluator(formula, self.kind.constants)(self._rule, e, y, s))
-
     def decide(self, e: Sequence[float], y: Sequence[float]) -> bool:
         """Whether to send at this sample, given the gap ``e = ybar - y`` and ``y``.
 
@@ -159,20 +151,9 @@ class SampledRule:
             if fire:
                 self.count = 0
             return fire
-        r, ym = _norm(e), (_norm(y) if self.kind.reads_y else None)
-        fire = self._apply(self.kind.trigger, r, ym, self.eta) >= 0.0
-        if self.kind.state == "none":
-            return bool(fire)
-        assert self.kind.flow is not None and self.kind.reset is not None  # an eta state has both
-        if fire:
-            self.eta = self._apply(self.kind.reset, r, ym, self.eta)  # e.g. eq. (14), jump
-            r = 0.0
-        flow = self.kind.flow
-
-        def f(s: float) -> float:  # e.g. eq. (14) over the period, |e| held
-            return self._apply(flow, r, ym, s)
-
-        decay = self.k.get(self.kind.decay or "")
-        rate = decay[1] if decay is not None and decay[0] is fm.LINEAR else None
-        self.eta = fm.eta_after_period(self.eta, f, self.period, rate)
-        return bool(fire)
+        r, ym = fm.norm(e), (fm.norm(y) if self.kind.reads_y else None)
+        decay = (
+            self.k[self.kind.decay] if self.kind.decay else (fm.LINEAR, 1.0, 0.0)
+        )  # unused without a filter
+        fire, self.eta = fm.sample_decision(self.kind, self._rule, r, ym, self.eta, self.period, decay)
+        return fire
