@@ -31,12 +31,13 @@ SRC = ROOT / "src"
 #: (../shared/design.md), with the units it does not place (``compile``, ``examples``,
 #: the shared modules) where the code has them, and ``runtime`` too: the design puts it
 #: just above ``codegen``, the code has it read problems of ``estimation`` and factories of
-#: ``examples``. ``report`` and ``codegen`` do not exist yet.
+#: ``examples``; ``codegen`` writes what the runtime's sensor node runs, from its rule specs
+#: and packet format, so it sits above ``runtime``. ``report`` does not exist yet.
 LAYERS = (
     ("etobs", "__main__"),  # the public API (imported lazily, PEP 562) and `python -m etobs`
     ("cli",),
     ("plot",),
-    ("tuning",),
+    ("tuning", "codegen"),
     ("experiments", "runtime"),
     ("design", "examples"),
     ("estimation",),

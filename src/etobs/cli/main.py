@@ -11,7 +11,7 @@ from typing import NoReturn
 
 from etobs._spec import SpecError
 from etobs._version import __version__
-from etobs.cli import check, compare, demo, runtime, sweep, tune
+from etobs.cli import check, codegen, compare, demo, runtime, sweep, tune
 from etobs.errors import EtobsError, debug
 
 
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_parsers(sub)
     check.add_parser(sub)
     compare.add_parser(sub)
+    codegen.add_parser(sub)
     tune.add_parser(sub)
     runtime.add_parsers(sub)
     return parser

@@ -258,8 +258,7 @@ def run_sensor(args: argparse.Namespace) -> int:
 
     dep = load(args.spec)
     pb = dep.problem()
-    if not 0 <= args.node < pb.n_nodes:
-        raise InputError(f"--node must be in 0..{pb.n_nodes - 1}; got {args.node}")
+    dep.node_rule(pb, args.node)  # a node out of range, a rule no node runs: said before anything starts
     if dep.x0 is None:
         raise InputError("the spec has no [plant] x0: a simulated sensor needs the plant's initial state")
     _check_samples(dep, "`runtime.duration`")
@@ -287,7 +286,7 @@ def run_sensor(args: argparse.Namespace) -> int:
                 check_epoch(epoch, dep.duration, dep.time_scale, time.time(), "the service's epoch")
             else:
                 epoch = _epoch(args.epoch, dep)
-            rule = SampledRule(pb.nodes[args.node].rule.sensor_spec(), dep.period)
+            rule = SampledRule(*dep.node_rule(pb, args.node))
             listen = send.recv_nowait if dep.transport == "udp" else None  # resync requests (UDP only)
             node = SensorNode(args.node, key, rule, send, seq, session=epoch, listen=listen)
             n = run(

@@ -23,6 +23,7 @@ from etobs._validate import shown
 from etobs.errors import InputError
 from etobs.estimation.problem import EstimationProblem
 from etobs.examples.registry import locate_factory, make_problem
+from etobs.model.sampled import Sampled
 from etobs.runtime.files import open_regular
 from etobs.runtime.server import is_loopback
 
@@ -97,6 +98,30 @@ class Deployment:
     def problem(self) -> EstimationProblem:
         """The estimation problem of ``[system]`` (a factory marked with :func:`etobs.factory`)."""
         return make_problem(self.factory, self.params, "system.params")
+
+    def node_rule(self, problem: EstimationProblem, node: int) -> tuple[dict[str, Any], float]:
+        """Node ``node``'s rule as a sensor runs it and its sampling period: ``runtime.period``.
+
+        A node whose rule is sampled already (:class:`~etobs.model.Sampled`) must be sampled
+        at ``runtime.period``: else what runs would not be what was simulated.
+
+        Raises
+        ------
+        InputError
+            A node out of range, a rule a sensor node does not run (named), a sampled rule
+            at another period.
+
+        """
+        if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < problem.n_nodes:
+            raise InputError(f"--node must be in 0..{problem.n_nodes - 1}; got {node!r}")
+        rule = problem.nodes[node].rule
+        period = rule.period if isinstance(rule, Sampled) else None
+        if period is not None and period != self.period:
+            raise SpecError(
+                f"node {node}'s rule is sampled at {period:g} s in the model, but `runtime.period` is "
+                f"{self.period:g} s: make them equal (what runs must be what was simulated)"
+            )
+        return rule.sensor_spec(), self.period
 
     def secret(self, *, create: bool = False) -> bytes:
         """The deployment secret; with ``create`` a new one is written (mode 600) if missing."""
