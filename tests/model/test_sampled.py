@@ -280,3 +280,75 @@ def test_rules_a_node_does_not_run_are_refused_naming_them() -> None:
         InputError, match=r"a sensor node runs the K-functions of etobs' kinds .*; `gamma` is Custom"
     ):
         Sampled(custom, period=0.01)
+
+
+# ---- in a comparison spec ----------------------------------------------------------------
+
+
+def _compare(rules: list[dict]) -> object:
+    import tomllib
+    from importlib.resources import files
+
+    from etobs.experiments.compare_spec import parse_compare_spec
+
+    raw = tomllib.loads(files("etobs.experiments").joinpath("data/robot_arm_sampled.toml").read_text())
+    raw["rules"] = rules
+    return parse_compare_spec(raw)
+
+
+def test_a_comparison_entry_runs_its_rule_sampled_per_node() -> None:
+    spec = _compare(
+        [{"name": "s", "kind": "static", "eps": 10.0, "sample_period": 0.005, "sample_phase": [0.0, 0.002]}]
+    )
+    nodes = spec.problem(0).nodes
+    assert [type(nd.rule).__name__ for nd in nodes] == ["Sampled", "Sampled"]
+    assert [(nd.rule.period, nd.rule.phase, type(nd.rule.rule).__name__) for nd in nodes] == [
+        (0.005, 0.0, "StaticRule"),
+        (0.005, 0.002, "StaticRule"),
+    ]
+    assert [type(nd.rule).__name__ for nd in _compare([{"name": "c", "kind": "base"}]).problem(0).nodes] == [
+        "DynamicRule",
+        "DynamicRule",
+    ]
+
+
+def test_comparison_sampling_mistakes_name_the_key() -> None:
+    from etobs._spec import SpecError
+
+    with pytest.raises(SpecError, match=r"`rules\[0\].sample_phase` needs `rules\[0\].sample_period`"):
+        _compare([{"name": "s", "kind": "base", "sample_phase": 0.001}])
+    with pytest.raises(
+        SpecError, match=r"`rules\[0\]`, node 1: `phase` must be in \[0, period\) = \[0, 0.005\); got 0.005"
+    ):
+        _compare(
+            [{"name": "s", "kind": "base", "sample_period": 0.005, "sample_phase": [0.0, 0.005]}]
+        ).problem(0)
+    with pytest.raises(
+        SpecError, match=r"`rules\[0\]`, node 0: Sampled: a PeriodicRule sends at fixed times already"
+    ):
+        _compare([{"name": "p", "kind": "periodic", "period": 0.1, "sample_period": 0.005}]).problem(0)
+
+
+# ---- what the certificate says ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("T", [0.05, 1.0])
+def test_the_certificate_of_a_sampled_rule_keeps_tau_and_leaves_out_what_is_not_proven(T) -> None:
+    """tau_i becomes max(T_i, tau_i) (0.283 s without sampling, E = 5): on both sides of it."""
+    from etobs.design import certify
+
+    cont = certify(robot_arm(), E=5.0, noise=[0.0, 0.01])
+    samp = certify(robot_arm(sample_period=T), E=5.0, noise=[0.0, 0.01])
+    assert samp.conditions == cont.conditions and samp.ok
+    taus = [nd.tau for nd in cont.nodes]
+    assert 0.05 < min(taus) and max(taus) < 1.0  # T = 0.05 is below both, T = 1.0 above both
+    assert [nd.tau for nd in samp.nodes] == [max(T, tau) for tau in taus]
+    assert math.isnan(samp.nu) and math.isnan(samp.mu) and math.isnan(samp.error_bound)
+    assert math.isfinite(cont.nu)
+    assert any("sampled rules (node 0 at T = " in n and "not proven for sampled rules" in n for n in samp.notes)
+
+
+def test_the_robot_arm_factory_samples_its_rules_on_request() -> None:
+    assert [type(nd.rule).__name__ for nd in robot_arm(sample_period=0.01).nodes] == ["Sampled", "Sampled"]
+    with pytest.raises(InputError, match=r"`sample_period` must be > 0; got -0.01"):
+        robot_arm(sample_period=-0.01)

@@ -17,7 +17,7 @@ import numpy as np
 from etobs import _validate as v
 from etobs._spec import factory
 from etobs.estimation.problem import EstimationProblem
-from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sinusoid
+from etobs.model import DynamicRule, Linear, Node, Observer, Plant, Quadratic, Sampled, Sinusoid
 
 A = np.array(
     [
@@ -75,6 +75,7 @@ def robot_arm(
     L: Any = L_PAPER,
     noise: bool = True,
     disturbance: bool = True,
+    sample_period: float | None = None,
 ) -> EstimationProblem:
     """Build the robot-arm estimation problem; defaults are the paper's first simulation.
 
@@ -86,6 +87,9 @@ def robot_arm(
         Observer gain (default: the paper's).
     noise, disturbance : bool
         Include the measurement noise ``m`` and the disturbance ``v``.
+    sample_period : float, optional
+        Run each node's rule sampled every ``sample_period`` seconds, as a sensor node
+        does (:class:`~etobs.model.Sampled`); default the continuous rule of the paper.
 
     Returns
     -------
@@ -105,14 +109,17 @@ def robot_arm(
     nodes = tuple(
         Node(
             outputs=(i,),
-            rule=DynamicRule(
-                gamma=Quadratic(params["ell"][i]),
-                alpha=Linear(params["a"][i]),
-                sigma=params["sigma"][i],
-                c=params["c"][i],
-                b=params["b"][i],
-                eps=params["eps"][i],
-                eta0=params["eta0"][i],
+            rule=_sampled(
+                DynamicRule(
+                    gamma=Quadratic(params["ell"][i]),
+                    alpha=Linear(params["a"][i]),
+                    sigma=params["sigma"][i],
+                    c=params["c"][i],
+                    b=params["b"][i],
+                    eps=params["eps"][i],
+                    eta0=params["eta0"][i],
+                ),
+                sample_period,
             ),
             name=f"sensor {i + 1}",
         )
@@ -125,6 +132,15 @@ def robot_arm(
         u=Sinusoid(amplitude=[1.0], omega=1.0),
         v=Sinusoid(amplitude=amp_v, omega=0.4),
         m=Sinusoid(amplitude=amp_m, omega=0.3),
+    )
+
+
+def _sampled(rule: DynamicRule, period: float | None) -> DynamicRule | Sampled:
+    """``rule``, or ``rule`` sampled every ``period`` seconds."""
+    return (
+        rule
+        if period is None
+        else Sampled(rule, period=v.real("sample_period", period, lower=0.0, lower_open=True))
     )
 
 
