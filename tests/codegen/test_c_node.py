@@ -149,6 +149,10 @@ def test_sha256_and_hmac_are_pythons_on_many_lengths(tmp_path):
         '    etobs_sha256_final(&s, d);\n    for (j = 0; j < 32; j++) printf("%02x", d[j]);\n    printf("\\n"); }\n'
         "  for (n = 0; n < 140; n += 1) { etobs_hmac_sha256(k, (size_t)n, m, 100, d);\n"
         '    for (j = 0; j < 32; j++) printf("%02x", d[j]);\n    printf("\\n"); }\n'
+        '  etobs_sha256_init(&s); etobs_sha256_update(&s, (const uint8_t *)"abc", 3); etobs_sha256_final(&s, d);\n'
+        '  for (j = 0; j < 32; j++) printf("%02x", d[j]);\n  printf("\\n");\n'
+        "  memset(k, 0x0b, 20); etobs_hmac_sha256(k, 20, (const uint8_t *)\"Hi There\", 8, d);\n"
+        '  for (j = 0; j < 32; j++) printf("%02x", d[j]);\n  printf("\\n");\n'
         "  return 0;\n}\n"
     )
     module(RULES["static"].sensor_spec(), 0.01, tmp_path)
@@ -159,11 +163,10 @@ def test_sha256_and_hmac_are_pythons_on_many_lengths(tmp_path):
     m = bytes((i * 7 + 1) % 256 for i in range(300))
     k = bytes((i * 13 + 5) % 256 for i in range(140))
     assert lines[:300] == [hashlib.sha256(m[:n]).hexdigest() for n in range(300)]
-    assert lines[300:] == [hmac.new(k[:n], m[:100], hashlib.sha256).hexdigest() for n in range(140)]
-    # the standard's own vectors, through Python (checked equal to the C above)
-    assert hashlib.sha256(b"abc").hexdigest().startswith("ba7816bf8f01cfea")
-    rfc = hmac.new(b"\x0b" * 20, b"Hi There", hashlib.sha256).hexdigest()
-    assert rfc == "b0344c61d8db38535ca8afceaf0bf12b881dc200c9833da726e9376c2e32cff7"
+    assert lines[300:440] == [hmac.new(k[:n], m[:100], hashlib.sha256).hexdigest() for n in range(140)]
+    # the standards' own vectors: FIPS 180-4's "abc", RFC 4231's test case 1
+    assert lines[440] == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+    assert lines[441] == "b0344c61d8db38535ca8afceaf0bf12b881dc200c9833da726e9376c2e32cff7"
 
 
 def test_the_module_uses_no_heap_and_no_libm_beyond_what_it_states(tmp_path):

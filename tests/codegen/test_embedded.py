@@ -18,11 +18,20 @@ from tests.codegen.cnode import build_arm, figures, has_arm, module, run_qemu, v
 
 pytestmark = [
     pytest.mark.embedded,
-    pytest.mark.skipif(not has_arm(), reason="needs arm-none-eabi-gcc and qemu-system-arm: run `make embedded`"),
+    pytest.mark.skipif(
+        not has_arm(), reason="needs arm-none-eabi-gcc and qemu-system-arm: run `make embedded`"
+    ),
 ]
 
 #: The call chain of a sample that sends: its frames add up to the node's stack use.
-CHAIN = ("etobs_node_sample", "emit", "etobs_encode", "etobs_hmac_sha256", "etobs_sha256_final", "etobs_sha256_update")
+CHAIN = (
+    "etobs_node_sample",
+    "emit",
+    "etobs_encode",
+    "etobs_hmac_sha256",
+    "etobs_sha256_final",
+    "etobs_sha256_update",
+)
 
 
 def stack_use(folder) -> dict[str, int]:
@@ -43,7 +52,9 @@ def test_a_cortex_m4f_replays_1e5_robot_arm_samples_as_the_python_sensor(tmp_pat
     vec, path = vectors(spec, 0.001, y[:, [0]], tmp_path)
     elf = build_arm(tmp_path)
     got = figures(run_qemu(elf, path.name, "1e-4"))
-    assert got["samples"] == 100_001 and got["packets_differ"] == 0 and got["transmissions"] == vec.transmissions
+    assert (
+        got["samples"] == 100_001 and got["packets_differ"] == 0 and got["transmissions"] == vec.transmissions
+    )
     if profile == "float64":
         assert got["decisions_equal"] == got["eta_equal"] == 100_001
     else:
@@ -53,9 +64,19 @@ def test_a_cortex_m4f_replays_1e5_robot_arm_samples_as_the_python_sensor(tmp_pat
     objs = []
     for src in ("etobs_node.c", "etobs_sha256.c"):
         obj = tmp_path / src.replace(".c", ".o")
-        flags = ["-std=c99", "-O2", "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-c"]
+        flags = [
+            "-std=c99",
+            "-O2",
+            "-mcpu=cortex-m4",
+            "-mthumb",
+            "-mfpu=fpv4-sp-d16",
+            "-mfloat-abi=hard",
+            "-c",
+        ]
         subprocess.run(["arm-none-eabi-gcc", *flags, "-o", str(obj), str(tmp_path / src)], check=True)
         objs.append(str(obj))
     size = subprocess.run(["arm-none-eabi-size", *objs], capture_output=True, text=True, check=True).stdout
-    print(f"\n{profile}: {got}\narm-none-eabi-size (-O2):\n{size}stack of a sample that sends: {stack} bytes {frames}")
+    print(
+        f"\n{profile}: {got}\narm-none-eabi-size (-O2):\n{size}stack of a sample that sends: {stack} bytes {frames}"
+    )
     assert 0 < stack < 2048
