@@ -345,7 +345,9 @@ def test_the_certificate_of_a_sampled_rule_keeps_tau_and_leaves_out_what_is_not_
     assert [nd.tau for nd in samp.nodes] == [max(T, tau) for tau in taus]
     assert math.isnan(samp.nu) and math.isnan(samp.mu) and math.isnan(samp.error_bound)
     assert math.isfinite(cont.nu)
-    assert any("sampled rules (node 0 at T = " in n and "not proven for sampled rules" in n for n in samp.notes)
+    assert any(
+        "sampled rules (node 0 at T = " in n and "not proven for sampled rules" in n for n in samp.notes
+    )
 
 
 def test_the_robot_arm_factory_samples_its_rules_on_request() -> None:
