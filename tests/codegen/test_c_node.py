@@ -151,7 +151,7 @@ def test_sha256_and_hmac_are_pythons_on_many_lengths(tmp_path):
         '    for (j = 0; j < 32; j++) printf("%02x", d[j]);\n    printf("\\n"); }\n'
         '  etobs_sha256_init(&s); etobs_sha256_update(&s, (const uint8_t *)"abc", 3); etobs_sha256_final(&s, d);\n'
         '  for (j = 0; j < 32; j++) printf("%02x", d[j]);\n  printf("\\n");\n'
-        "  memset(k, 0x0b, 20); etobs_hmac_sha256(k, 20, (const uint8_t *)\"Hi There\", 8, d);\n"
+        '  memset(k, 0x0b, 20); etobs_hmac_sha256(k, 20, (const uint8_t *)"Hi There", 8, d);\n'
         '  for (j = 0; j < 32; j++) printf("%02x", d[j]);\n  printf("\\n");\n'
         "  return 0;\n}\n"
     )
@@ -220,6 +220,7 @@ def test_what_the_generator_cannot_write_is_one_line_naming_it():
 FACTORY = """
 from etobs.examples.robot_arm import robot_arm
 from etobs.model import Custom, DynamicRule, Linear, Sampled
+from etobs.model.rules import StatelessRule
 import dataclasses
 import etobs
 
@@ -228,6 +229,17 @@ def custom():
     pb = robot_arm()
     rule = DynamicRule(gamma=Custom(lambda s: 5 * s * s), alpha=Linear(2.0), eps=10.0)
     return dataclasses.replace(pb, nodes=(dataclasses.replace(pb.nodes[0], rule=rule), pb.nodes[1]))
+
+class Mine(StatelessRule):
+    def trigger(self, t, e, s, y=None):
+        return e[:, 0] - 1.0
+
+
+@etobs.factory
+def own():
+    pb = robot_arm()
+    return dataclasses.replace(pb, nodes=(pb.nodes[0], dataclasses.replace(pb.nodes[1], rule=Mine())))
+
 
 @etobs.factory
 def sampled():
@@ -243,6 +255,11 @@ def sampled():
         ("custom", 0, r"a sensor node runs the K-functions of etobs' kinds .*`gamma` is Custom"),
         ("sampled", 0, r"node 0's rule is sampled at 0.005 s in the model, but `runtime.period` is 0.002 s"),
         ("custom", 2, r"--node must be in 0..1; got 2"),
+        (
+            "own",
+            1,
+            r"a sensor node runs the rules of etobs' kinds \(dynamic, .*\); got Mine, a rule of your own",
+        ),
     ],
 )
 def test_codegen_cli_mistakes_are_one_line(tmp_path, capsys, factory, node, message):

@@ -24,7 +24,7 @@ from etobs.examples import robot_arm
 from etobs.runtime.packet import decode
 from etobs.runtime.server import ObserverServer
 from etobs.runtime.service import VERDICTS, ObserverCore
-from tests.codegen.cnode import build, module
+from tests.codegen.cnode import ROOT, build, module
 from tests.estimation import linear
 from tests.runtime.loopback import KEYS, final_gap, reference
 from tests.runtime.test_live import _hostile
@@ -171,3 +171,97 @@ def test_the_service_refuses_forged_and_replayed_packets_around_a_c_node(tmp_pat
     assert c == expected
     assert tuple(snap["transmissions"]) == ref.transmissions and snap["gaps"] == [0]
     assert final_gap(snap, ref) < 1e-6
+
+
+DEPLOYMENT = """
+name = "oscillator"
+[system]
+factory = "tests.estimation.linear:factory"
+[runtime]
+period = 0.005
+duration = 3.0
+time_scale = 3.0
+host = "127.0.0.1"
+port = 0
+hold_back = 3.0
+secret_file = "secret.key"
+[plant]
+x0 = [1.0, -0.5]
+"""
+
+
+def test_a_c_node_talks_to_etobs_serve(tmp_path):
+    """The commands as a user runs them: `etobs serve SPEC --epoch -`, `etobs codegen c`, `etobs codegen
+    vectors --deployment EPOCH` and the host harness; serve's final estimate is the offline reference's."""
+    import json
+    import os
+    import sys
+
+    from etobs.cli.main import main
+    from etobs.runtime.packet import node_keys
+    from etobs.runtime.replay import replay, sample_outputs
+
+    spec = tmp_path / "deploy.toml"
+    spec.write_text(DEPLOYMENT)
+    (tmp_path / "secret.key").write_bytes(os.urandom(32))
+    (tmp_path / "secret.key").chmod(0o600)
+    assert main(["codegen", "c", str(spec), "--node", "0", "--out", str(tmp_path / "node0")]) == 0
+    exe = build(tmp_path / "node0", "etobs_host.c", "host")
+    vectors = tmp_path / "v0.txt"
+    assert (
+        main(["codegen", "vectors", str(spec), "--node", "0", "--out", str(vectors)]) == 0
+    )  # warm, public key
+    serve = subprocess.Popen(
+        [sys.executable, "-m", "etobs", "serve", str(spec), "--epoch", "-", "--linger", "2"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},  # the spec's factory is tests.estimation.linear
+    )
+    try:
+        said = [serve.stderr.readline() for _ in range(1)]  # "etobs serve: UDP 127.0.0.1:PORT": it listens
+        assert said[0].startswith("etobs serve: UDP 127.0.0.1:"), said
+        port = int(said[0].split("UDP 127.0.0.1:")[1].split()[0].rstrip(","))
+        epoch = time.time() + 1.0
+        assert (
+            main(
+                [
+                    "codegen",
+                    "vectors",
+                    str(spec),
+                    "--node",
+                    "0",
+                    "--out",
+                    str(vectors),
+                    "--deployment",
+                    repr(epoch),
+                ]
+            )
+            == 0
+        )
+        assert oct(vectors.stat().st_mode & 0o777) == "0o600"
+        serve.stdin.write(repr(epoch) + "\n")
+        serve.stdin.flush()
+        host = subprocess.run(
+            [str(exe), str(vectors), "127.0.0.1", str(port), "3.0"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out, err = serve.communicate(timeout=120)
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.communicate()
+    assert host.returncode == 0 and serve.returncode == 0, (host.stderr, err)
+    snap = json.loads(out)
+    pb = linear.factory()
+    t, y = sample_outputs(pb, [1.0, -0.5], 3.0, 0.005)
+    ref = replay(pb, node_keys((tmp_path / "secret.key").read_bytes(), [0]), t, y, 0.005)
+    assert tuple(snap["transmissions"]) == ref.transmissions and ref.transmissions[0] > 3
+    assert snap["counts"]["applied"] == ref.transmissions[0] and snap["counts"]["initial"] == 1
+    assert snap["late"] == 0 and snap["gaps"] == [0] and snap["status"] == "ok"
+    assert final_gap(snap, ref) < 1e-6
+    assert host.stdout.split() == ["host:", f"samples={len(t)}", f"transmissions={ref.transmissions[0]}"]

@@ -4,14 +4,16 @@
 rule at ``runtime.period``, packets, HMAC-SHA256, sequence numbers through callbacks; see
 the generated README.md and docs/embedded.md). ``vectors`` writes what the Python sensor
 node does on the spec's simulated samples (:mod:`etobs.codegen.vectors`), for the
-generated ``etobs_vectors.c`` to replay. A rule or K-function the generator cannot write is
-one line naming it, exit 2.
+generated ``etobs_vectors.c`` to replay; with ``--deployment EPOCH`` signed with the
+deployment's key and session, for ``etobs_host.c`` to send to ``etobs serve --epoch
+EPOCH``. A rule or K-function the generator cannot write is one line naming it, exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+import os
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +48,14 @@ def add_parser(sub: Any) -> None:
     c.set_defaults(func=run_c)
     v.add_argument("--out", type=Path, required=True, help="the vector file to write")
     v.add_argument("--duration", type=positive_float, help="seconds of samples (default runtime.duration)")
+    v.add_argument(
+        "--deployment",
+        metavar="EPOCH",
+        type=positive_float,
+        help="sign with the node's key of the spec's secret and the session EPOCH (the --epoch of etobs "
+        "serve), so that etobs_host.c can replay the vectors to the running service; the file then "
+        "holds the node's key (written mode 600). Default: a public test key and session",
+    )
     v.set_defaults(func=run_vectors)
 
 
@@ -79,15 +89,18 @@ def run_vectors(args: argparse.Namespace) -> int:
     if dep.x0 is None:
         raise InputError("the spec has no [plant] x0: the vectors need the plant's initial state")
     _, y = sample_outputs(pb, list(dep.x0), args.duration or dep.duration, period)
-    key = derive_key(hashlib.sha256(VECTOR_SECRET).digest(), args.node)
-    vec = node_vectors(
-        spec,
-        period,
-        node=args.node,
-        key=key,
-        session=VECTOR_SESSION,
-        samples=y[:, list(pb.nodes[args.node].outputs)],
-    )
+    if args.deployment is None:
+        key, session = derive_key(hashlib.sha256(VECTOR_SECRET).digest(), args.node), VECTOR_SESSION
+    else:
+        key, session = derive_key(dep.secret(), args.node), args.deployment
+    samples = y[:, list(pb.nodes[args.node].outputs)]
+    vec = node_vectors(spec, period, node=args.node, key=key, session=session, samples=samples)
+    if args.deployment is not None:  # it holds the node's key: readable by its owner only
+        args.out.unlink(missing_ok=True)
+        os.close(os.open(args.out, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
     write_vectors(vec, args.out)
-    print(f"wrote {args.out}: {len(vec.k)} samples, {vec.transmissions} transmissions of node {args.node}")
+    said = " (it holds the node's key: keep it as the secret)" if args.deployment is not None else ""
+    print(
+        f"wrote {args.out}: {len(vec.k)} samples, {vec.transmissions} transmissions of node {args.node}{said}"
+    )
     return 0
