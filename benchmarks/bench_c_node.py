@@ -125,6 +125,7 @@ def arm(sub: Path, vectors: Path, profile: str, repeats: int) -> None:
     run = [*QEMU, "-icount", "shift=0", "-semihosting-config", semi, "-kernel", str(elf)]
     out = subprocess.run(run, capture_output=True, text=True, timeout=600).stdout
     ticks = float(re.search(r"ticks_per_sample=([0-9.]+)", out).group(1))
+    state = re.search(r"state_bytes=(\d+)", out).group(1)
     per_tick = 200_000 / float(re.search(r"calibration_ticks=(\d+)", out).group(1))
     objs = []
     for name in ("etobs_node.c", "etobs_sha256.c"):
@@ -143,7 +144,7 @@ def arm(sub: Path, vectors: Path, profile: str, repeats: int) -> None:
     print(
         f"Cortex-M4F (QEMU), {profile}: {ticks * per_tick:.0f} instructions per sample "
         f"({ticks:.2f} SysTick ticks, {per_tick:.1f} instructions per tick); code {text} bytes "
-        f"(etobs_node.o + etobs_sha256.o, -O2); stack of a sample that sends {stack} bytes"
+        f"(etobs_node.o + etobs_sha256.o, -O2); stack of a sample that sends {stack} bytes; state {state} bytes"
     )
 
 

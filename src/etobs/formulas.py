@@ -558,14 +558,15 @@ def sample_decision(
     y: float | None,
     s: float,
     period: float,
-    decay: tuple[KKind, float, float],
+    decay: tuple[KKind, float, float] | None,
 ) -> tuple[bool, float]:
     """Whether a node of ``kind`` sends at a sample, and its filter state at the next sample.
 
     The sampled rule (eq. (14)--(15) at a sampling period): send when the trigger is
     ``>= 0`` at ``(|e_k|, |y_k|, eta_k)``; on sending ``eta <- reset(eta)`` and ``|e| = 0``;
     then ``eta`` over the period with ``|e|`` held (:func:`eta_period`; ``decay`` is the
-    kind's decay K-function and its numbers). ``rule`` is what :func:`evaluator` reads.
+    kind's decay K-function and its numbers, ``None`` for a kind without a filter).
+    ``rule`` is what :func:`evaluator` reads.
     The one implementation for the sensor node and the simulator's reference; the
     engine's model and the generated C code follow these steps on the same formulas
     (and are checked against it bit for bit).
@@ -573,7 +574,7 @@ def sample_decision(
     fire = float(evaluator(kind.trigger, kind.constants)(rule, e, y, s)) >= 0.0
     if kind.state != "eta":
         return fire, s
-    assert kind.flow is not None and kind.reset is not None  # an eta state has both
+    assert kind.flow is not None and kind.reset is not None and decay is not None  # an eta state has them
     if fire:
         s = float(evaluator(kind.reset, kind.constants)(rule, e, y, s))  # eq. (14), jump
         e = 0.0

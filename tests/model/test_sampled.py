@@ -87,7 +87,7 @@ def check_against_sensor(res, pb: EstimationProblem, run: int = 0) -> dict[int, 
         cols = [tr.names.index(f"sent_y{k}") for k in nd.outputs]
         assert np.array_equal(tr.x[rows][:, cols], y[fires])
         if nd.rule.base.kind.state == "eta":  # the filter at every sample: eta_{k+1}
-            rule = len(pb.rule_names) - len(pb.sampled_channels) + pb.sampled_channels.index(i)
+            rule = pb.sample_rule(i)
             after = np.searchsorted(
                 res.solution.arcs[run].j, log.j[(log.run == run) & (log.rule == rule)] + 1
             )
@@ -315,10 +315,13 @@ def test_a_comparison_entry_runs_its_rule_sampled_per_node() -> None:
 def test_comparison_sampling_mistakes_name_the_key() -> None:
     from etobs._spec import SpecError
 
+    with pytest.raises(SpecError, match=r"`rules\[0\]`, node 0: `sample_period` must be > 0; got 0"):
+        _compare([{"name": "s", "kind": "base", "sample_period": 0.0}]).problem(0)
     with pytest.raises(SpecError, match=r"`rules\[0\].sample_phase` needs `rules\[0\].sample_period`"):
         _compare([{"name": "s", "kind": "base", "sample_phase": 0.001}])
     with pytest.raises(
-        SpecError, match=r"`rules\[0\]`, node 1: `phase` must be in \[0, period\) = \[0, 0.005\); got 0.005"
+        SpecError,
+        match=r"`rules\[0\]`, node 1: `sample_phase` must be in \[0, period\) = \[0, 0.005\); got 0.005",
     ):
         _compare(
             [{"name": "s", "kind": "base", "sample_period": 0.005, "sample_phase": [0.0, 0.005]}]
@@ -354,3 +357,27 @@ def test_the_robot_arm_factory_samples_its_rules_on_request() -> None:
     assert [type(nd.rule).__name__ for nd in robot_arm(sample_period=0.01).nodes] == ["Sampled", "Sampled"]
     with pytest.raises(InputError, match=r"`sample_period` must be > 0; got -0.01"):
         robot_arm(sample_period=-0.01)
+
+
+def test_a_run_that_starts_late_samples_from_its_first_sample_not_before_t0() -> None:
+    """t0 = 2.004 with samples every 10 ms at phase 0: the first sample is at 2.01, none is replayed at t0."""
+    pb = sampled(robot_arm(noise=False), 0.01)
+    res = simulate(pb, np.array(X0_PAPER), 2.5, t0=2.004, save=SaveAt(steps=True))
+    assert res.ok
+    t, _ = res.samples(0, 0)
+    assert len(t) == 49 and t[0] == pytest.approx(2.01, abs=1e-12) and t[-1] == pytest.approx(2.49, abs=1e-12)
+    on = simulate(pb, np.array(X0_PAPER), 2.5, t0=2.0, save=SaveAt(steps=True))
+    assert on.samples(0, 1)[0][0] == 2.0  # a sample at t0 itself is taken
+    assert [Sampled(DYN, 0.01, 0.004).first_sample(t0) for t0 in (0.0, 0.004, 0.0041, 1.0)] == [0, 0, 1, 100]
+
+
+def test_samples_names_a_bad_node_or_run() -> None:
+    res = simulate(sampled(robot_arm(), 0.01), np.array(X0_PAPER), 0.1, save=SaveAt(steps=True))
+    for bad in ("0", 0.0, True, 2):
+        with pytest.raises(InputError, match=r"`node` must be a sampled output node, one of \[0, 1\]; got "):
+            res.samples(0, bad)
+    with pytest.raises(InputError, match=r"`run` must be an integer in 0..0; got '0'"):
+        res.samples("0", 0)
+    with pytest.raises(InputError, match=r"this result kept no arcs"):
+        grid = SaveAt(steps=False, grid=np.linspace(0.0, 0.1, 3))
+        simulate(sampled(robot_arm(), 0.01), np.array(X0_PAPER), 0.1, save=grid).samples(0, 0)

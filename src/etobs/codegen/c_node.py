@@ -97,6 +97,11 @@ def generate_node(
         raise InputError(f"etobs codegen c: {exc}") from None
     prof = PROFILES[profile]
     kind = rule.kind
+    if kind.state == "clock" and not (abs(rule.count) < 2**62 and rule.every < 2**62):
+        raise InputError(
+            f"etobs codegen c: a periodic rule of {rule.every!r} samples a period, first at sample "
+            f"{rule.every - rule.count - 1!r}, does not fit the C node's 64-bit sample count"
+        )
     uses_pow = any(k[0] is fm.POWER for k in rule.k.values())
     libm = f"{prof['sqrt']}" + (f", {prof['pow']}" if uses_pow else "")
     subs = {

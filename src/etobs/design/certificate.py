@@ -102,6 +102,11 @@ class Certificate:
         a design's region;
         without ISS gains, Assumption 2 for the rules' own ``gamma_i`` (Remark 1).
         The guarantees hold only where they do. Shown in every view of the certificate.
+    sampled : tuple of float or None
+        Each node's sampling period when the problem's nodes sample their rules
+        (:class:`~etobs.model.Sampled`; ``None`` for a continuous one), else empty: the
+        conditions are then the continuous rules' and the figures those that carry over
+        (see the note).
 
     """
 
@@ -118,6 +123,7 @@ class Certificate:
     iss: QuadraticISS | None = None
     disturbance: float = math.nan
     assumptions: tuple[str, ...] = field(default=())
+    sampled: tuple[float | None, ...] = field(default=())
 
     @property
     def ok(self) -> bool:
@@ -210,12 +216,14 @@ class Certificate:
         return f"<table>{body}</table>"
 
     def _verdict(self) -> str:
+        sampled = " of the continuous rules (nodes sample them: see the note)" if any(self.sampled) else ""
         if not self.ok:
-            return f"{len(self.failures())} of {len(self.conditions)} conditions fail"
+            return f"{len(self.failures())} of {len(self.conditions)} conditions{sampled} fail"
         if not self.assumptions:
-            return "all conditions hold"
+            return f"all conditions{sampled} hold"
         n = len(self.assumptions)
-        return f"all conditions hold, under the {n} assumption{'s' if n > 1 else ''} stated (not checked)"
+        under = f"under the {n} assumption{'s' if n > 1 else ''} stated (not checked)"
+        return f"all conditions{sampled} hold, {under}"
 
     def _figures(self) -> list[tuple[str, str]]:
         """The guaranteed numbers that are defined, formatted: ``nu``, ``a_U``, ``mu``, the bound, ``tau``."""
@@ -421,6 +429,7 @@ def _sampled(cert: Certificate, periods: list[float | None]) -> Certificate:
         error_bound=math.nan,
         d_U=(),
         notes=(*cert.notes, note),
+        sampled=tuple(periods),
     )
 
 

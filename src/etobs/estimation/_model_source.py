@@ -170,6 +170,19 @@ class _Node:
         return self.s0 if self.form.kind.state == "none" else self.s0 + 1
 
     @property
+    def mark(self) -> int:
+        """Offset from ``s0`` of a sampled node's mark (a transmission due)."""
+        return self.sk - self.s0 + 1
+
+    @property
+    def tp(self) -> int:
+        """Offset in its numbers of a sampled node's period (its phase follows).
+
+        After the kind's numbers and two per K-function slot (:func:`_node`).
+        """
+        return len(self.form.kind.numbers) + 2 * len(self.form.kind.slots)
+
+    @property
     def size(self) -> int:
         return len(self.sq)
 
@@ -620,13 +633,12 @@ def _guard(c: _Code, at: _Where, groups: list[_Group], samples: list[_Node]) -> 
         c.indent()
         gi = f"g[{off} + i]" if off else "g[i]"
         if grp.first.sampled:
-            c.line(f"{gi} = q[s0 + {grp.first.sk - grp.first.s0 + 1}] - 0.5  # due at this sample")
+            c.line(f"{gi} = q[s0 + {grp.first.mark}] - 0.5  # due at this sample")
         else:
             c.line(f"{gi} = {_apply(c, grp, kind, 'trigger')}")  # e.g. eq. (15), (45), (54)
         c.dedent()
     for m, nd in enumerate(samples):
-        tp = len(nd.form.kind.numbers) + 2 * len(nd.form.kind.slots)  # its period, then its phase
-        c.line(f"g[{off + at.n_ch + m}] = t - (p[{nd.p0 + tp + 1}] + q[{nd.sk}] * p[{nd.p0 + tp}])")
+        c.line(f"g[{off + at.n_ch + m}] = t - (p[{nd.p0 + nd.tp + 1}] + q[{nd.sk}] * p[{nd.p0 + nd.tp}])")
 
 
 def _jump(c: _Code, at: _Where, groups: list[_Group], samples: list[_Node]) -> None:
@@ -657,7 +669,7 @@ def _jump(c: _Code, at: _Where, groups: list[_Group], samples: list[_Node]) -> N
         c.lines(grp.send("jj"))
         kind = grp.first.form.kind
         if grp.first.sampled:  # its sample reset the filter: the mark is cleared
-            c.line(f"q[s0 + {grp.first.sk - grp.first.s0 + 1}] = 0.0")
+            c.line(f"q[s0 + {grp.first.mark}] = 0.0")
         elif kind.reset is not None:
             c.line(f"q[s0] = {_apply(c, grp, kind, 'reset')}")  # e.g. eq. (14)
         c.dedent()
@@ -684,7 +696,6 @@ def _sample(c: _Code, at: _Where, groups: list[_Group]) -> None:
     for idx, grp in enumerate(groups):
         nd, kind = grp.first, grp.first.form.kind
         dk = nd.sk - nd.s0  # the next sample's index, then the mark, after the rule's own state
-        tp = len(kind.numbers) + 2 * len(kind.slots)  # the period in the node's numbers
         c.line(f"{'if' if idx == 0 else 'elif'} gs == {grp.index}:")
         c.indent()
         c.line("jj = SP[m]")
@@ -699,7 +710,7 @@ def _sample(c: _Code, at: _Where, groups: list[_Group]) -> None:
         c.line(f"q[s0 + {dk}] = q[s0 + {dk}] + 1.0")
         c.line("if tr >= 0.0:")
         c.indent()
-        c.line(f"q[s0 + {dk + 1}] = 1.0")
+        c.line(f"q[s0 + {nd.mark}] = 1.0")
         if kind.state == "eta":
             assert kind.reset is not None and kind.decay is not None
             c.line(f"q[s0] = {_apply(c, grp, kind, 'reset', given)}")  # eq. (14), jump
@@ -710,7 +721,7 @@ def _sample(c: _Code, at: _Where, groups: list[_Group]) -> None:
             j = [slot.name for slot in kind.slots].index(kind.decay or "")
             kname, base = nd.kforms[j][0], len(kind.numbers) + 2 * j
             k12 = f"p[r + {base}], p[r + {base + 1}]"
-            c.line(f"q[s0] = ETA_PERIOD_{kname.upper()}(q[s0], drive, {k12}, p[r + {tp}])")
+            c.line(f"q[s0] = ETA_PERIOD_{kname.upper()}(q[s0], drive, {k12}, p[r + {nd.tp}])")
         c.dedent()
 
 

@@ -146,8 +146,8 @@ class _Assembly:
 
     def jump(self, k: int, t: np.ndarray, q: np.ndarray) -> np.ndarray:
         n_ch = len(self.channels)
-        if k >= n_ch * (2 if self.networked else 1):
-            return self._sample(self.channels[self.sampled[k - n_ch * (2 if self.networked else 1)]], t, q)
+        if k >= self.pb.first_sample_rule:
+            return self._sample(self.channels[self.sampled[k - self.pb.first_sample_rule]], t, q)
         if not self.networked:
             return self._send(self.channels[k], k, t, q)
         if k < n_ch:

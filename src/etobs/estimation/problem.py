@@ -159,6 +159,15 @@ class EstimationProblem:
         return tuple(c for c, ch in enumerate(self.layout.channels) if isinstance(ch.rule, Sampled))
 
     @property
+    def first_sample_rule(self) -> int:
+        """The jump rule of the first sampled channel's samples: after the deliveries and transmissions."""
+        return self.n_channels * (2 if self.network is not None else 1)
+
+    def sample_rule(self, channel: int) -> int:
+        """The jump rule of sampled channel ``channel``'s samples (:attr:`rule_names`)."""
+        return self.first_sample_rule + self.sampled_channels.index(channel)
+
+    @property
     def extended(self) -> bool:
         """Whether the problem goes beyond the base setting (input nodes, copy hold, a network)."""
         return bool(self.input_nodes) or self.hold != "output" or self.network is not None
@@ -222,6 +231,8 @@ class EstimationProblem:
             if ch.kind == "u":
                 q[:, ch.held] = u0[:, ch.index]
             q[:, ch.rule_state] = ch.rule.initial_state()
+            if isinstance(ch.rule, Sampled):  # its first sample is the first not before t0
+                q[:, ch.rule_state.start + ch.rule.n_own] = ch.rule.first_sample(t0)
             q[:, ch.sent] = q[:, ch.held]
             if ch.net is not None:
                 q[:, slot_columns(ch)[0]] = EMPTY

@@ -24,7 +24,8 @@ if TYPE_CHECKING:
 STATUS_ADVICE = {
     Status.MAX_JUMPS: (
         "The jumps are transmissions: many transmissions (a short period, a tiny eps, or a "
-        "state that grows without bound) end a run so"
+        "state that grows without bound) end a run so; a sampled node's samples are jumps too "
+        "(one per period: a long run at a short period needs a larger max_jumps)"
     ),
     Status.ZENO: (
         "The jumps are transmissions: check that every eps is > 0 and not tiny next to "
@@ -330,7 +331,8 @@ class EstimationResult:
         values decides as the simulation did: the same samples send, bit for bit when
         ``ytilde_i`` is computed alike (``h`` picks states, no noise ``m``). Read from the
         arc at each of the node's samples (requires ``SaveAt(steps=True)``), with the
-        problem's ``h`` and ``m`` in numpy.
+        problem's ``h`` and ``m`` in numpy. (A node of the observer-copy hold sends
+        ``ytilde_i - yhat_i``, which a deployed node does not: the runtime refuses that hold.)
 
         Returns
         -------
@@ -339,14 +341,16 @@ class EstimationResult:
 
         """
         pb = self.problem
-        if not 0 <= node < pb.n_nodes or node not in pb.sampled_channels:
-            sampled = [c for c in pb.sampled_channels if c < pb.n_nodes]
-            raise InputError(f"`node` must be a sampled output node ({sampled}); got {node!r}")
-        a = self.arc(run)  # checks run and the arcs
+        sampled = [c for c in pb.sampled_channels if c < pb.n_nodes]
+        if isinstance(node, bool) or not isinstance(node, int | np.integer) or node not in sampled:
+            raise InputError(f"`node` must be a sampled output node, one of {sampled}; got {node!r}")
+        if isinstance(run, bool) or not isinstance(run, int | np.integer):
+            raise InputError(f"`run` must be an integer in 0..{self.n_runs - 1}; got {run!r}")
+        a = self.arc(run)  # checks run's range and the arcs
         arcs = self.solution.arcs
         assert arcs is not None
         log = self.solution.jumps
-        rule = len(pb.rule_names) - len(pb.sampled_channels) + pb.sampled_channels.index(node)
+        rule = pb.sample_rule(int(node))
         rows = (log.run == run) & (log.rule == rule)
         after = np.searchsorted(arcs[run].j, log.j[rows] + 1, side="left")  # the state after the sample
         t = a.t[after]

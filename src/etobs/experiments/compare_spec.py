@@ -124,7 +124,11 @@ class RuleEntry:
             rule = self._made(node, p, base)
             if not sample:
                 return rule
-            return Sampled(rule, period=sample["sample_period"], phase=sample.get("sample_phase", 0.0))
+            try:
+                return Sampled(rule, period=sample["sample_period"], phase=sample.get("sample_phase", 0.0))
+            except EtobsError as exc:  # said in the spec's words
+                said = str(exc).replace("`period`", "`sample_period`").replace("`phase`", "`sample_phase`")
+                raise SpecError(f"`{self.where}`, node {node}: {said}") from exc
         except SpecError:
             raise
         except EtobsError as exc:

@@ -22,6 +22,7 @@ is (see ``docs/runtime.md``). The inter-event time is at least ``T`` by construc
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -116,6 +117,10 @@ class Sampled(TriggerRule):
     def initial_state(self) -> np.ndarray:
         return np.concatenate([self.base.initial_state(), [0.0, 0.0]])
 
+    def first_sample(self, t0: float) -> int:
+        """The index ``k`` of the first sample at or after ``t0`` (as :func:`etobs.runtime.sensor.run`)."""
+        return max(0, math.ceil((t0 - self.phase) / self.period - 1e-9))
+
     def derivative(
         self, t: np.ndarray, e: np.ndarray, s: np.ndarray, y: np.ndarray | None = None
     ) -> np.ndarray:
@@ -135,11 +140,11 @@ class Sampled(TriggerRule):
         """``t - t_k``, ``t_k = phase + k period`` the next sample (``k`` in the state)."""
         return t - (self.phase + s[:, -2] * self.period)
 
-    def decay(self) -> tuple[fm.KKind, float, float]:
+    def decay(self) -> tuple[fm.KKind, float, float] | None:
         """The kind of the filter's decay K-function and its numbers (:func:`etobs.formulas.eta_period`)."""
         kind = self.base.kind
         if kind.decay is None:
-            return fm.LINEAR, 1.0, 0.0  # no filter: not used
+            return None
         k, k1, k2, _ = getattr(self.base, kind.decay).engine_form()
         assert k is not None  # sensor_spec() refused a K-function of no kind
         return k, k1, k2

@@ -103,7 +103,8 @@ class Deployment:
         """Node ``node``'s rule as a sensor runs it and its sampling period: ``runtime.period``.
 
         A node whose rule is sampled already (:class:`~etobs.model.Sampled`) must be sampled
-        at ``runtime.period``: else what runs would not be what was simulated.
+        at ``runtime.period`` with phase 0 (a node samples at ``k T``): else what runs would
+        not be what was simulated.
 
         Raises
         ------
@@ -115,11 +116,11 @@ class Deployment:
         if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < problem.n_nodes:
             raise InputError(f"--node must be in 0..{problem.n_nodes - 1}; got {node!r}")
         rule = problem.nodes[node].rule
-        period = rule.period if isinstance(rule, Sampled) else None
-        if period is not None and period != self.period:
+        if isinstance(rule, Sampled) and (rule.period != self.period or rule.phase != 0.0):
             raise SpecError(
-                f"node {node}'s rule is sampled at {period:g} s in the model, but `runtime.period` is "
-                f"{self.period:g} s: make them equal (what runs must be what was simulated)"
+                f"node {node}'s rule is sampled at period {rule.period!r} s, phase {rule.phase!r} s in the "
+                f"model, but a node samples at k * `runtime.period` = k * {self.period!r} s: make them equal "
+                "(what runs must be what was simulated)"
             )
         return rule.sensor_spec(), self.period
 

@@ -152,8 +152,6 @@ class SampledRule:
                 self.count = 0
             return fire
         r, ym = fm.norm(e), (fm.norm(y) if self.kind.reads_y else None)
-        decay = (
-            self.k[self.kind.decay] if self.kind.decay else (fm.LINEAR, 1.0, 0.0)
-        )  # unused without a filter
+        decay = self.k[self.kind.decay] if self.kind.decay else None  # the filter's decay K-function
         fire, self.eta = fm.sample_decision(self.kind, self._rule, r, ym, self.eta, self.period, decay)
         return fire
