@@ -328,7 +328,10 @@ def test_cli_bad_spec_exits_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["compare", str(tmp_path / "missing.toml")])
     assert exc.value.code == 2
-    assert "does not exist (SPEC is a TOML file or one of robot_arm)" in capsys.readouterr().err
+    assert (
+        "does not exist (SPEC is a TOML file or one of robot_arm, robot_arm_sampled)"
+        in capsys.readouterr().err
+    )
 
 
 def test_packaged_robot_arm_spec_parses():

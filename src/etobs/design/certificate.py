@@ -403,10 +403,12 @@ def _sampled(cert: Certificate, periods: list[float | None]) -> Certificate:
     only at samples, so its inter-event time is at least ``T_i``; and only when
     ``gamma_i(|e_i|) >= eps_i`` at a sample (its filter stays ``>= 0``), which after a
     transmission (``e_i = 0``) takes at least Theorem 4's ``tau_i`` when ``E`` bounds the
-    output's rate: ``tau_i`` becomes ``max(T_i, tau_i)``. What does not: Theorem 1's and
-    2's decrease of ``U`` (with ``nu``, ``mu``) and the error bound assume that
-    ``gamma_i(|e_i|)`` never exceeds the threshold, which between samples it may (by up
-    to ``gamma_i`` of ``E_i T_i`` more gap); they are left out (``nan``), said in a note.
+    output's rate: ``tau_i`` becomes ``max(T_i, tau_i)``.
+
+    What does not: the decrease of ``U`` of Theorems 1 and 2 (with ``nu``, ``mu``) and the
+    error bound assume that ``gamma_i(|e_i|)`` never exceeds the threshold, which between
+    samples it may (by up to ``gamma_i`` of ``E_i T_i`` more gap); they are left out
+    (``nan``), said in a note.
     """
     nodes = tuple(
         nd if T is None else replace(nd, tau=max(T, nd.tau) if math.isfinite(nd.tau) else T)
