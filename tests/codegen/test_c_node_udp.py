@@ -212,7 +212,9 @@ def test_a_c_node_talks_to_etobs_serve(tmp_path):
         main(["codegen", "vectors", str(spec), "--node", "0", "--out", str(vectors)]) == 0
     )  # warm, public key
     serve = subprocess.Popen(
-        [sys.executable, "-m", "etobs", "serve", str(spec), "--epoch", "-", "--linger", "2"],
+        # --linger: serve waits 8 s past the end for late packets (a loaded machine), with the
+        # observer held back the whole run (hold_back = duration), so lateness changes nothing
+        [sys.executable, "-m", "etobs", "serve", str(spec), "--epoch", "-", "--linger", "8"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
