@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-fast bench embedded lint clean
+.PHONY: demo test test-fast bench embedded docs lint clean
 
 $(VENV)/.installed-%: pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -65,5 +65,10 @@ embedded: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m embedded -s tests/codegen
 	$(BIN)/python benchmarks/bench_c_node.py
 
+## docs: the documentation site into docs/_build/html (README.md is its front page), warnings
+## as errors; tests/test_docs_site.py builds it too, in `make test`
+docs: $(VENV)/.installed-docs
+	$(BIN)/sphinx-build -W --keep-going -c docs -b html . docs/_build/html
+
 clean:
-	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis
+	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis docs/_build docs/api.rst docs/generated
