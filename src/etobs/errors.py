@@ -30,19 +30,62 @@ def cause(exc: BaseException) -> BaseException | None:
 
 
 class EtobsError(Exception):
-    """Base class of every exception raised on purpose by etobs."""
+    """Base class of every exception raised on purpose by etobs.
+
+    Examples
+    --------
+    Catch every mistake etobs reports, and only those:
+
+    >>> import etobs
+    >>> try:
+    ...     etobs.Linear(-1.0)
+    ... except etobs.EtobsError as exc:
+    ...     print(exc)
+    `a` must be > 0; got -1
+
+    """
 
 
 class InputError(EtobsError, ValueError):
-    """An argument has the right type but a wrong value or shape."""
+    """An argument has the right type but a wrong value or shape.
+
+    Examples
+    --------
+    >>> import etobs
+    >>> etobs.StaticRule(gamma=etobs.Linear(1.0), eps=0.0)
+    Traceback (most recent call last):
+    ...
+    etobs.errors.InputError: `eps` must be > 0; got 0
+
+    """
 
 
 class InputTypeError(EtobsError, TypeError):
-    """An argument has the wrong type."""
+    """An argument has the wrong type.
+
+    Examples
+    --------
+    >>> import etobs
+    >>> etobs.Node([0], rule="dynamic")
+    Traceback (most recent call last):
+    ...
+    etobs.errors.InputTypeError: `rule` must be a TriggerRule (DynamicRule, StaticRule, PeriodicRule); got str
+
+    """
 
 
 class ModelError(InputError):
-    """A user model function (plant, observer, rule) returned something unusable."""
+    """A user model function (plant, observer, rule) returned something unusable.
+
+    Examples
+    --------
+    >>> import numpy as np, etobs
+    >>> etobs.FunctionSignal(lambda t: np.zeros(3), dim=2)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    etobs.errors.ModelError: signal function `fn` returned shape (3,) for t = 0.0; expected (2,): ...
+
+    """
 
 
 class DesignError(EtobsError):
@@ -54,4 +97,14 @@ class PerformanceWarning(RuntimeWarning):
 
     For example a model whose lane form is not vector code (docs/solver.md). Silence it
     with ``warnings.filterwarnings("ignore", category=etobs.PerformanceWarning)``.
+
+    Examples
+    --------
+    >>> import warnings, etobs
+    >>> issubclass(etobs.PerformanceWarning, RuntimeWarning)
+    True
+    >>> with warnings.catch_warnings():  # here only; filterwarnings alone: everywhere
+    ...     warnings.filterwarnings("ignore", category=etobs.PerformanceWarning)
+    ...     warnings.warn("a slow path", etobs.PerformanceWarning)
+
     """

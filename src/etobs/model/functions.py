@@ -93,7 +93,21 @@ class Builtin(KFunction):
 
 @dataclass(frozen=True)
 class Linear(Builtin):
-    """``a * s`` with ``a > 0``."""
+    """``a * s`` with ``a > 0``: the paper's ``alpha_i``.
+
+    Parameters
+    ----------
+    a : float
+        The slope, ``> 0``.
+
+    Examples
+    --------
+    >>> from etobs import Linear
+    >>> alpha = Linear(2.0)
+    >>> alpha([0.0, 1.5]).tolist(), alpha.inverse(3.0).item(), str(alpha)
+    ([0.0, 3.0], 1.5, '2*s')
+
+    """
 
     a: float
     kind: ClassVar[KKind] = LINEAR
@@ -101,7 +115,21 @@ class Linear(Builtin):
 
 @dataclass(frozen=True)
 class Quadratic(Builtin):
-    """``ell * s**2`` with ``ell > 0`` (the paper's ``𝔩 s²``)."""
+    """``ell * s**2`` with ``ell > 0`` (the paper's ``𝔩 s²``): ``gamma_i`` of section 8.
+
+    Parameters
+    ----------
+    ell : float
+        The coefficient, ``> 0``.
+
+    Examples
+    --------
+    >>> from etobs import Quadratic
+    >>> gamma = Quadratic(5.0)
+    >>> gamma(2.0).item(), gamma.inverse(20.0).item(), str(gamma)
+    (20.0, 2.0, '5*s^2')
+
+    """
 
     ell: float
     kind: ClassVar[KKind] = QUADRATIC
@@ -109,7 +137,23 @@ class Quadratic(Builtin):
 
 @dataclass(frozen=True)
 class Power(Builtin):
-    """``k * s**p`` with ``k > 0`` and ``p > 0``."""
+    """``k * s**p`` with ``k > 0`` and ``p > 0``.
+
+    Parameters
+    ----------
+    k : float
+        The coefficient, ``> 0``.
+    p : float
+        The exponent, ``> 0``.
+
+    Examples
+    --------
+    >>> from etobs import Power
+    >>> f = Power(3.0, 1.5)
+    >>> f(4.0).item(), round(f.inverse(24.0).item(), 12), str(f)
+    (24.0, 4.0, '3*s^1.5')
+
+    """
 
     k: float
     p: float

@@ -14,6 +14,25 @@ class Node:
     """Sensor node ``i``: owns the outputs ``y[outputs]`` (the set ``I_i``) and a rule.
 
     Nodes are indexed from 0 in code (node 0 is the paper's sensor 1).
+
+    Parameters
+    ----------
+    outputs : sequence of int
+        The indices of ``y`` the node measures and sends (the nodes' sets partition ``y``).
+    rule : TriggerRule
+        When it sends: :class:`~etobs.model.DynamicRule` (eq. (14)--(15)) or another rule.
+    name : str, optional
+        How tables, results and figures name it (default ``node<i>``).
+
+    Examples
+    --------
+    The robot arm's first node, measuring ``y_1``:
+
+    >>> from etobs import DynamicRule, Linear, Node, Quadratic
+    >>> rule = DynamicRule(gamma=Quadratic(5), alpha=Linear(2), sigma=600, c=0.001, eps=10, eta0=10)
+    >>> Node([0], rule, name="sensor 1").outputs
+    (0,)
+
     """
 
     outputs: tuple[int, ...]
@@ -38,6 +57,22 @@ class InputNode:
     eq. (53)--(54) (e.g. a :class:`~etobs.model.DynamicRule` with ``gamma_u``,
     ``alpha_u``, ``sigma_u``, ``c_u``, ``b_u``, ``eps_u``). Components of ``u`` that no
     input node sends reach the observer exactly, as in the base setting.
+
+    Parameters
+    ----------
+    inputs : sequence of int
+        The indices of ``u`` it sends.
+    rule : TriggerRule
+        Its rule, acting on ``e_u = ubar - u``.
+    name : str, optional
+        How results name it (default ``input<i>``).
+
+    Examples
+    --------
+    >>> from etobs import InputNode, StaticRule, Linear
+    >>> InputNode([0], StaticRule(gamma=Linear(1.0), eps=0.05)).inputs
+    (0,)
+
     """
 
     inputs: tuple[int, ...]

@@ -306,6 +306,23 @@ class StaticRule(KindRule):
 
     It has no internal state; it transmits exactly when :class:`DynamicRule` with
     ``sigma = 0`` and the same ``gamma`` and ``eps`` does.
+
+    Parameters
+    ----------
+    gamma : KFunction
+        ``gamma_i``, e.g. ``Quadratic(5.0)``.
+    eps : float
+        The threshold ``eps_i > 0``.
+
+    Examples
+    --------
+    ``5 |e|^2 >= 10``, i.e. ``|e| >= 1.414``:
+
+    >>> from etobs import Quadratic, StaticRule
+    >>> rule = StaticRule(gamma=Quadratic(5.0), eps=10.0)
+    >>> (rule.trigger(np.zeros(2), np.array([[1.0], [1.5]]), np.empty((2, 0))) >= 0).tolist()
+    [False, True]
+
     """
 
     gamma: KFunction
@@ -338,6 +355,13 @@ class PeriodicRule(KindRule):
         Sampling period, ``> 0``.
     first : float, optional
         Time of the first transmission, ``>= 0`` (default: ``period``).
+
+    Examples
+    --------
+    >>> from etobs import PeriodicRule
+    >>> rule = PeriodicRule(period=0.25)
+    >>> rule.first, rule.initial_state().tolist()  # the clock starts at period - first
+    (0.25, [0.0])
 
     """
 

@@ -36,7 +36,20 @@ class Signal(ABC):
 
 @dataclass(frozen=True)
 class Zero(Signal):
-    """The zero signal of dimension ``dim``."""
+    """The zero signal of dimension ``dim``: no input, no disturbance or no noise.
+
+    Parameters
+    ----------
+    dim : int
+        Its dimension, ``>= 0``.
+
+    Examples
+    --------
+    >>> from etobs import Zero
+    >>> Zero(2)(np.array([0.0, 1.0])).tolist()
+    [[0.0, 0.0], [0.0, 0.0]]
+
+    """
 
     dim: int
 
@@ -52,7 +65,22 @@ class Zero(Signal):
 
 @dataclass(frozen=True)
 class Constant(Signal):
-    """A constant vector."""
+    """A constant vector: ``value`` at every time.
+
+    Parameters
+    ----------
+    value : array_like, shape (dim,)
+        The signal's value.
+
+    Examples
+    --------
+    A constant wind ``v = 0.5``:
+
+    >>> from etobs import Constant
+    >>> Constant([0.5])(np.array([0.0, 7.0])).tolist(), Constant([0.5]).dim
+    ([[0.5], [0.5]], 1)
+
+    """
 
     value: np.ndarray
 
@@ -73,6 +101,17 @@ class Constant(Signal):
 @dataclass(frozen=True)
 class Sinusoid(Signal):
     """``amplitude * sin(omega * t + phase) + offset``, with a vector amplitude.
+
+    Parameters
+    ----------
+    amplitude : array_like, shape (dim,)
+        One amplitude per component.
+    omega : float
+        Angular frequency (rad/s).
+    phase : float, optional
+        Phase (rad), default ``0``.
+    offset : float or array_like, optional
+        Added to every component (one number) or per component; default ``0``.
 
     Examples
     --------
@@ -119,6 +158,13 @@ class FunctionSignal(Signal):
     """A user signal ``fn(t) -> (dim,)`` for one time ``t`` (a float), checked at construction.
 
     Write it with numpy or ``math``: etobs compiles it.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(t)`` for a float ``t``, returning a 1-D array of ``dim`` values.
+    dim : int
+        The signal's dimension.
 
     Examples
     --------
