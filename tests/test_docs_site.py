@@ -7,6 +7,8 @@ the search and the cross-references use) and its pages.
 
 from __future__ import annotations
 
+import enum
+import inspect
 import io
 import re
 import subprocess
@@ -72,3 +74,27 @@ def test_the_front_page_is_the_readme_and_every_page_is_built(site: Path) -> Non
     # the README's links reach the pages, the changes and the example, in the site
     for href in ("docs/models.html", "CHANGES.html", "first_hour.py"):
         assert href in front, href
+
+
+@pytest.mark.parametrize("name", sorted(etobs.__all__))
+def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name: str) -> None:
+    """Examples everywhere (the doctests of ``src`` run them); Parameters and Returns where they apply.
+
+    A function has Parameters and Returns; a class that takes arguments has Parameters
+    (or, a record of values, Attributes). Exceptions, enums and interfaces without
+    arguments of their own have no Parameters.
+    """
+    from numpydoc.docscrape import NumpyDocString
+
+    obj = getattr(etobs, name)
+    if not callable(obj):
+        assert name == "__version__" and re.fullmatch(r"\d+\.\d+\.\d+.*", obj)
+        return
+    doc = NumpyDocString(inspect.getdoc(obj) or "")
+    assert doc["Summary"], f"{name}: no summary line"
+    assert doc["Examples"], f"{name}: no Examples section"
+    if inspect.isclass(obj):
+        exempt = issubclass(obj, BaseException | enum.Enum) or not inspect.signature(obj).parameters
+        assert exempt or doc["Parameters"] or doc["Attributes"], f"{name}: no Parameters section"
+    else:
+        assert doc["Parameters"] and doc["Returns"], f"{name}: Parameters {bool(doc['Parameters'])}, Returns"

@@ -54,6 +54,20 @@ def transmission_counts(
     -------
     ndarray of int, shape (B, number of nodes)
 
+    Examples
+    --------
+    The robot arm from the paper's ``x0``, 10 s: each node's transmissions, then those of
+    the first 5 s:
+
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 10.0, 1001))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 10.0, save=grid)
+    >>> from etobs import transmission_counts
+    >>> transmission_counts(res).tolist(), transmission_counts(res, (0.0, 5.0)).tolist()
+    ([[16, 16]], [[4, 9]])
+
     """
     lo, hi = _window(window, result)
     first, count = _node_range(result, nodes)
@@ -68,23 +82,89 @@ def input_transmission_counts(result: EstimationResult, window: Any = None) -> n
     """Transmissions of each input node (section 7.3), counted apart from the outputs'.
 
     Same as ``transmission_counts(result, window, nodes="inputs")``.
+
+    Parameters
+    ----------
+    result : EstimationResult
+    window : (float, float), optional
+        Closed time window; default the whole horizon.
+
+    Returns
+    -------
+    ndarray of int, shape (B, number of input nodes)
+
+    Examples
+    --------
+    A problem without input nodes has none to count:
+
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 10.0, 1001))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 10.0, save=grid)
+    >>> from etobs import input_transmission_counts
+    >>> input_transmission_counts(res).shape
+    (1, 0)
+
     """
     return transmission_counts(result, window, nodes="inputs")
 
 
 def inter_event_times(result: EstimationResult, run: int, node: int) -> np.ndarray:
-    """Times between consecutive transmissions of ``node`` in ``run``."""
+    """Times between consecutive transmissions of ``node`` in ``run``.
+
+    Parameters
+    ----------
+    result : EstimationResult
+    run, node : int
+        The run of the batch and the node (output nodes, then input nodes).
+
+    Returns
+    -------
+    ndarray, shape (transmissions - 1,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 10.0, 1001))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 10.0, save=grid)
+    >>> from etobs import inter_event_times
+    >>> inter_event_times(res, 0, 0).round(3)[:4].tolist()
+    [0.574, 0.386, 0.514, 1.916]
+
+    """
     return np.diff(result.transmission_times(run, node))
 
 
 def min_inter_event_time(result: EstimationResult, *, nodes: str = "outputs") -> np.ndarray:
     """Smallest time between two transmissions of the same node.
 
+    Parameters
+    ----------
+    result : EstimationResult
+    nodes : {"outputs", "inputs", "all"}
+        As in :func:`transmission_counts`.
+
     Returns
     -------
     ndarray, shape (B, number of nodes)
         NaN where a node transmitted fewer than twice. ``nodes`` as in
         :func:`transmission_counts`.
+
+    Examples
+    --------
+    The paper reports 0.201 s and 0.112 s on 30 s (section 8); on the first 10 s:
+
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 10.0, 1001))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 10.0, save=grid)
+    >>> from etobs import min_inter_event_time
+    >>> min_inter_event_time(res).round(4).tolist()
+    [[0.2007, 0.1115]]
 
     """
     first, count = _node_range(result, nodes)
@@ -113,10 +193,28 @@ def max_estimation_error(result: EstimationResult, window: Any) -> np.ndarray:
     ``SaveAt(grid=g, max_distance="estimation_error")`` kept only this maximum over
     ``g``: the window must then contain every point of ``g``.
 
+    Parameters
+    ----------
+    result : EstimationResult
+        Simulated with a save grid (``SaveAt(grid=...)``).
+    window : (float, float)
+        Closed time window.
+
     Returns
     -------
     ndarray, shape (B,)
         NaN for runs that stopped before reaching the window.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 10.0, 1001))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 10.0, save=grid)
+    >>> from etobs import max_estimation_error
+    >>> max_estimation_error(res, (5.0, 10.0)).round(3).tolist()
+    [6.889]
 
     """
     lo, hi = _window(window, result)

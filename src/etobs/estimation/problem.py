@@ -57,6 +57,20 @@ class EstimationProblem:
         Delays and losses between the nodes and the observer (not in the paper; see
         :mod:`etobs.model.network`). Default: the paper's ideal network.
 
+    Examples
+    --------
+    A damped oscillator measured by two nodes, one output each:
+
+    >>> import numpy as np
+    >>> from etobs import DynamicRule, EstimationProblem, Linear, Node, Plant, Quadratic, luenberger
+    >>> A = np.array([[0.0, 1.0], [-2.0, -0.5]])
+    >>> plant = Plant(f_p=lambda t, x, u, v: A @ x, h=lambda x: x, n_x=2, n_y=2)
+    >>> observer = luenberger(lambda t, x, u: A @ x, L=np.eye(2) * 3.0)
+    >>> rule = DynamicRule(gamma=Quadratic(1.0), alpha=Linear(1.0), sigma=0.5, c=0.5, eps=1e-3)
+    >>> problem = EstimationProblem(plant, observer, nodes=[Node([0], rule), Node([1], rule)])
+    >>> problem.n_nodes, problem.rule_names
+    (2, ('node0', 'node1'))
+
     """
 
     plant: Plant

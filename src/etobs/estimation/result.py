@@ -55,6 +55,14 @@ class Trajectory:
         ``eta_i`` of each node (first entry of its rule state; NaN for stateless rules),
         output nodes then input nodes.
 
+    Examples
+    --------
+    >>> from etobs import simulate
+    >>> from etobs.examples import robot_arm
+    >>> arc = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 1.0).arc(0)  # every step and jump
+    >>> float(arc.t[0]), arc.x.shape[1], arc.eta[0].tolist()
+    (0.0, 4, [10.0, 10.0])
+
     """
 
     t: np.ndarray
@@ -86,7 +94,35 @@ class Trajectory:
 class EstimationResult:
     """Per-run status, transmission log and trajectories of a simulation.
 
-    Nodes are indexed from 0 (node 0 is the paper's sensor 1).
+    Nodes are indexed from 0 (node 0 is the paper's sensor 1). :func:`etobs.simulate`
+    returns it; read it with ``transmissions``, :meth:`arc` (a run's hybrid arc),
+    :meth:`on_grid` (every run on the save grid), :meth:`to_pandas` and the metrics of
+    :mod:`etobs.estimation`.
+
+    Parameters
+    ----------
+    problem : EstimationProblem
+        What was simulated.
+    solution : HybridSolution
+        The solver's result (status, jump log, arcs or grid of every run; its
+        ``backend``, ``"engine"`` or ``"scipy"``).
+    backend_reason : str
+        Why that backend ran (``simulate(backend="auto")`` says it).
+    notes : tuple of str
+        What was done otherwise than asked, and why.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from etobs import SaveAt, simulate
+    >>> from etobs.examples import robot_arm
+    >>> grid = SaveAt(grid=np.linspace(0.0, 5.0, 501))
+    >>> res = simulate(robot_arm(), [3.0, 2.0, 3.0, -2.0], 5.0, save=grid)
+    >>> res.ok, res.n_runs, res.n_nodes, res.transmission_times(0, 0).round(3)[:3].tolist()
+    (True, 1, 2, [2.347, 2.92, 3.306])
+    >>> res.on_grid().xhat.shape  # (runs, grid points, n_x)
+    (1, 501, 4)
+
     """
 
     problem: EstimationProblem

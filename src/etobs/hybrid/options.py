@@ -70,6 +70,15 @@ class SolverOptions:
         crossing speed: on a stiff flow at DOP853's stability boundary that can reach
         1e-6 s at the default tolerances (docs/solver.md, "Event-time accuracy").
 
+    Examples
+    --------
+    Table 1's tolerances, and a bound on the jumps of a run:
+
+    >>> from etobs import SolverOptions
+    >>> opts = SolverOptions(rtol=1e-10, atol=1e-10, max_jumps=100_000)
+    >>> opts.rtol, opts.max_jumps
+    (1e-10, 100000)
+
     """
 
     method: str = "dop853"
@@ -132,6 +141,16 @@ class SaveAt:
         run is solved (``HybridSolution.grid_max``; NaN when a value is not finite or a
         point was never reached). Memory no longer grows with the grid.
         ``"estimation_error"`` is for :func:`etobs.simulate`: ``max |x - xhat|``.
+
+    Examples
+    --------
+    The states on a 1 ms grid over 30 s, without every step of the arc:
+
+    >>> import numpy as np
+    >>> from etobs import SaveAt
+    >>> save = SaveAt(steps=False, grid=np.linspace(0.0, 30.0, 30_001))
+    >>> save.steps, save.grid.shape
+    (False, (30001,))
 
     """
 

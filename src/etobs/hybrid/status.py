@@ -11,7 +11,15 @@ from collections.abc import Mapping
 
 
 class Status(enum.IntEnum):
-    """How a run ended."""
+    """How a run ended: every run ends with one of these, in bounded time (docs/solver.md).
+
+    Examples
+    --------
+    >>> from etobs import Status
+    >>> Status.COMPLETED.ok, Status.MAX_JUMPS.label, Status(6).label
+    (True, 'max_jumps', 'zeno')
+
+    """
 
     RUNNING = -1
     COMPLETED = 0

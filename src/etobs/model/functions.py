@@ -24,7 +24,21 @@ from etobs.formulas import CONSTANT, K_KINDS, LINEAR, POWER, QUADRATIC, KKind
 
 
 class KFunction(ABC):
-    """A class-K∞ function ``[0, ∞) → [0, ∞)``: continuous, zero at zero, increasing, unbounded."""
+    """A class-K∞ function ``[0, ∞) → [0, ∞)``: continuous, zero at zero, increasing, unbounded.
+
+    The interface of ``alpha_i`` and ``gamma_i``: :class:`Linear`, :class:`Quadratic`,
+    :class:`Power` (etobs' kinds, which the engine and a sensor node run) and
+    :class:`Custom` (a function of your own) implement it.
+
+    Examples
+    --------
+    >>> from etobs import Custom, KFunction, Linear
+    >>> isinstance(Linear(2.0), KFunction), Linear(2.0).engine_form()[1:]
+    (True, (2.0, 0.0, None))
+    >>> Custom(lambda s: s**3).engine_form()[0] is None  # no kind: the engine compiles the function
+    True
+
+    """
 
     @abstractmethod
     def __call__(self, s: np.ndarray) -> np.ndarray:

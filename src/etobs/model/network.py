@@ -199,6 +199,15 @@ class Link:
     capacity : int
         Packets in flight at most; a packet sent while the link is full is dropped.
 
+    Examples
+    --------
+    20 % of the packets lost, the others 10 ms late:
+
+    >>> from etobs import Link
+    >>> link = Link(delay=0.01, loss=0.2)
+    >>> link.instant, link.capacity
+    (False, 16)
+
     """
 
     delay: Delay | float = 0.0

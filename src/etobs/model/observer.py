@@ -42,6 +42,17 @@ class Observer:
         are ``n_z`` and its columns the outputs ``f_o`` expects, so a problem with a
         plant of another ``n_y`` or ``n_x`` is refused naming ``L``.
 
+    Examples
+    --------
+    A Luenberger observer of ``x' = -x`` written by hand, its gain ``L = 2`` carried in
+    ``params`` (another gain compiles nothing new):
+
+    >>> import numpy as np
+    >>> from etobs import Observer
+    >>> obs = Observer(f_o=lambda t, z, u, ybar, yhat, p: -z + p[0] * (ybar - yhat), n_z=1, params=[2.0])
+    >>> obs.call_f_o(0.0, np.array([1.0]), np.zeros(0), np.array([3.0]), np.array([1.0])).tolist()
+    [3.0]
+
     """
 
     f_o: ObserverFn
@@ -81,6 +92,11 @@ def luenberger(f: Callable[..., np.ndarray], L: Any, *, name: str = "luenberger"
         disturbance).
     L : array_like, shape (n_x, n_y)
         Observer gain.
+
+    Returns
+    -------
+    Observer
+        With ``n_z = n_x`` and ``psi`` the identity.
 
     Examples
     --------

@@ -65,6 +65,19 @@ class TriggerRule(ABC):
 
     A rule that reads the current measurement sets ``reads_y = True``; only then is
     ``y=`` passed, so rules written as ``trigger(t, e, s)`` keep working.
+
+    Examples
+    --------
+    etobs' rules implement it; a rule of your own does too (the scipy reference runs it):
+
+    >>> import numpy as np
+    >>> from etobs import DynamicRule, Linear, Quadratic, TriggerRule
+    >>> rule = DynamicRule(gamma=Quadratic(5), alpha=Linear(2), sigma=600, c=0.001, eps=10, eta0=10)
+    >>> isinstance(rule, TriggerRule), rule.n_state, rule.initial_state().tolist()
+    (True, 1, [10.0])
+    >>> rule.trigger(np.zeros(1), np.array([[2.0]]), np.array([[0.0]])).tolist()  # 5*2^2 - 10
+    [10.0]
+
     """
 
     reads_y: ClassVar[bool] = False
@@ -391,6 +404,8 @@ class RelativeRule(KindRule):
     eps : float
         Absolute floor, ``> 0``.
 
+    Examples
+    --------
     >>> RelativeRule(rho=0.1, eps=0.01).trigger(np.zeros(1), np.array([[0.5]]), np.empty((1, 0)),
     ...                                          y=np.array([[3.0]])).round(12).tolist()
     [0.19]
