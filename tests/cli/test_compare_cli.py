@@ -124,6 +124,13 @@ def test_trade_off_plot(comparison):
     _, ax = plot_tradeoff(comparison)
     assert len(ax.get_legend().get_texts()) == 7 + 2
     assert ax.get_yscale() == "log"
+    # coinciding points stay visible: hollow markers, each rule's smaller than the one before
+    points = [
+        ln for ln in ax.get_lines() if ln.get_marker() not in ("None", None, "") and len(ln.get_xdata()) == 1
+    ]
+    assert points and all(ln.get_markerfacecolor() == "none" for ln in points)
+    sizes = {ln.get_color(): ln.get_markersize() for ln in points}  # rule k is drawn in colour C<k>
+    assert sizes == {f"C{k}": max(12.0 - 2.0 * k, 4.0) for k in range(len(sizes))} and len(sizes) >= 5
 
 
 def test_cli_writes_table_json_plot_and_resumes(tmp_path, capsys):

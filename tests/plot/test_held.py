@@ -247,6 +247,20 @@ def test_a_result_with_neither_arcs_nor_grid_says_what_to_keep():
         plot_held_outputs(result.solution)
 
 
+@pytest.mark.parametrize("logy", [False, True])
+def test_inter_event_times_are_the_gaps_on_a_linear_or_log_axis(arcs_only, logy):
+    from etobs.estimation import inter_event_times
+
+    _, axes = plot_inter_event_times(arcs_only, run=0, logy=logy)
+    for node, ax in enumerate(axes):
+        assert ax.get_yscale() == ("log" if logy else "linear")
+        gaps = inter_event_times(arcs_only, 0, node)
+        if gaps.size:
+            drawn = [c for c in ax.collections if len(c.get_segments())]  # the stems
+            heights = np.array([seg[1][1] for seg in drawn[0].get_segments()])
+            np.testing.assert_array_equal(heights, gaps)
+
+
 def test_inter_event_times_check_the_run(arcs_only):
     # it drew empty panels for a run that does not exist
     with pytest.raises(InputError, match=r"`run` must be in 0\.\.1; got 5"):

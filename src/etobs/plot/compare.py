@@ -18,7 +18,9 @@ def plot_tradeoff(comparison: Comparison, *, log: bool = True) -> tuple[Any, Any
     """Mean transmissions (all nodes, in the window) against mean ``max |x - xhat|``.
 
     One point per (rule, network): colour by rule, marker by network. A vertical bar
-    reaches the worst run's error. Lower left is better.
+    reaches the worst run's error. Lower left is better. Markers are hollow, and each
+    rule's smaller than the one before, so rules whose figures coincide stay visible as
+    nested markers (two rules that send alike hid each other).
     """
     rows = comparison.table()
     rules = list(dict.fromkeys(r["rule"] for r in rows))
@@ -32,7 +34,8 @@ def plot_tradeoff(comparison: Comparison, *, log: bool = True) -> tuple[Any, Any
         color = f"C{rules.index(r['rule']) % 10}"
         marker = _MARKERS[networks.index(r["network"]) % len(_MARKERS)]
         ax.plot([x, x], [y, top], color=color, lw=0.8, alpha=0.6)
-        ax.plot(x, y, marker=marker, color=color, ls="none", ms=7)
+        ms = max(12.0 - 2.0 * rules.index(r["rule"]), 4.0)  # nested where points coincide
+        ax.plot(x, y, marker=marker, color=color, ls="none", ms=ms, mfc="none", mew=1.5)
     for k, name in enumerate(rules):  # legend entries: rules by colour, networks by marker
         ax.plot([], [], color=f"C{k % 10}", lw=4, label=name)
     for k, name in enumerate(networks):

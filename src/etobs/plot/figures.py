@@ -89,8 +89,14 @@ def plot_error(result: EstimationResult, run: int = 0, *, log: bool = True) -> t
     return fig, ax
 
 
-def plot_inter_event_times(result: EstimationResult, run: int = 0) -> tuple[Any, np.ndarray]:
-    """Time since the node's previous transmission, at each transmission, one panel per node."""
+def plot_inter_event_times(
+    result: EstimationResult, run: int = 0, *, logy: bool = False
+) -> tuple[Any, np.ndarray]:
+    """Time since the node's previous transmission, at each transmission, one panel per node.
+
+    ``logy``: a logarithmic time axis, so that millisecond intervals stay visible next to
+    gaps of seconds.
+    """
     run = _run(result.n_runs, run)
     N = result.n_nodes
     fig, axes = _figure(N, 1.8 * N + 0.6)
@@ -103,7 +109,9 @@ def plot_inter_event_times(result: EstimationResult, run: int = 0) -> tuple[Any,
             ax.axhline(gaps.min(), color="C3", lw=0.8, ls=":", label=f"min {gaps.min():.3f} s")
             ax.legend(loc="upper right", fontsize="small")
         ax.set_ylabel(f"{name}\n[s]")
-        ax.grid(alpha=0.3)
+        if logy:
+            ax.set_yscale("log")
+        ax.grid(alpha=0.3, which="both" if logy else "major")
     axes[-1].set_xlabel("t [s]")
     fig.suptitle("Inter-transmission times")
     return fig, axes
