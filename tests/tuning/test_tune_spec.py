@@ -1,5 +1,7 @@
 """Every mistake in a tuning spec is one error naming its key."""
 
+import math
+
 import pytest
 
 from etobs._spec import SpecError
@@ -117,3 +119,24 @@ def test_the_cli_says_it_in_one_line_with_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err == f"etobs: error: {path}: `parameters.eps` is an empty box: `low` = 5 > `high` = 1\n"
+
+
+def test_sampled_rules_are_tuned_on_a_simulated_budget_and_say_what_certified_means():
+    """Sampled rules have no proven error bound: a certified budget is refused at the start;
+    a candidate's certificate says that it checked the continuous rules' conditions."""
+    from etobs.tuning.evaluate import Evaluator
+
+    system = {**BASE["system"], "fixed": {**BASE["system"]["fixed"], "sample_period": 0.005}}
+    certified = parse_tune_spec(raw_tune(system=system, budget={"kind": "certified", "error": 12.0}))
+    with pytest.raises(
+        SpecError,
+        match=r'`budget.kind` = "certified" needs Theorem 2\'s error bound, which is '
+        r"not proven for sampled rules",
+    ):
+        Evaluator(certified, None, {})
+    ev = Evaluator(parse_tune_spec(raw_tune(system=system)), None, {})
+    figs = ev.certify(
+        {"sigma": [600.0, 800.0], "eps": [10.0, 10.0], "a": [2.0, 2.0]}, next(iter(ev.gains), None)
+    )
+    assert figs.ok and "sampled rules (node 0 at T = 0.005 s, node 1 at T = 0.005 s)" in figs.assumptions
+    assert math.isnan(figs.error_bound) and min(figs.tau) >= 0.005

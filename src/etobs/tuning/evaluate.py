@@ -109,11 +109,17 @@ class Evaluator:
         # wrong length, a disturbance below the problem's) is the spec's, not every candidate's
         iss = None if first is None else self.gains[first][0]
         try:
-            certify_with(problem, iss, spec.guarantees, E=self.E)
+            cert = certify_with(problem, iss, spec.guarantees, E=self.E)
         except InputError as exc:
             raise SpecError(
                 f"the start design (the factory with `system.fixed`) cannot be certified: {exc}"
             ) from exc
+        if spec.budget.kind == "certified" and any(cert.sampled):
+            raise SpecError(
+                '`budget.kind` = "certified" needs Theorem 2\'s error bound, which is not proven for '
+                "sampled rules (the nodes of `system` sample theirs): give the budget as "
+                '`kind = "simulated"`'
+            )
 
     def sim_kwargs(self, kwargs: dict[str, Any], observer: str | None) -> dict[str, Any]:
         """The factory's arguments a candidate is simulated with (its observer's ``L`` added).
@@ -170,7 +176,9 @@ class Evaluator:
             bound = cert.error_bound
             cons["budget"] = (bound - spec.budget.error) / spec.budget.error if math.isfinite(bound) else 1.0
         text = "; ".join(f"{c.name}{'' if c.node is None else f' [node {c.node}]'}" for c in fails)
-        assumed = "; ".join(cert.assumptions)
+        # sampled nodes: certified means the continuous rules' conditions, and tau (the note)
+        said = [n for n in cert.notes if n.startswith("sampled rules")] if any(cert.sampled) else []
+        assumed = "; ".join([*cert.assumptions, *said])
         return CertificateFigures(cert.ok, text, cert.nu, cert.mu, cert.error_bound, taus, cons, assumed)
 
     def simulate(
