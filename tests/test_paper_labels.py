@@ -350,7 +350,9 @@ def scanned_files() -> list[Path]:
             files.append(path)
         else:
             files.extend(p for p in sorted(path.rglob("*")) if p.suffix in SUFFIXES and p.is_file())
-    return [p for p in files if p.resolve() != Path(__file__).resolve() and ".venv" not in p.parts]
+    # the site's build outputs (make docs) copy the pages: their citations are the pages'
+    generated = {".venv", "_build", "generated", "gallery_out"}
+    return [p for p in files if p.resolve() != Path(__file__).resolve() and not generated & set(p.parts)]
 
 
 def all_citations() -> list[Citation]:

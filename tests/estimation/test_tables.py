@@ -220,7 +220,20 @@ def test_summary_without_a_grid_has_no_max_error_and_with_only_the_max_keeps_it(
 def test_grid_table_is_the_saved_grid_in_long_form(arm):
     df = arm.to_pandas("grid")
     tr = arm.on_grid()
-    assert list(df.columns) == ["run", "t", "j", "variable", "component", "value"]
+    assert list(df.columns) == ["run", "t", "j", "variable", "component", "value", "name", "unit"]
+    # each row names its quantity as the model does (the robot arm names its states and outputs)
+    x = df[(df["variable"] == "x") & (df["run"] == 1)]
+    assert list(x["name"][:5]) == [
+        "motor angle",
+        "motor velocity",
+        "link angle",
+        "link velocity",
+        "motor angle",
+    ]
+    assert list(x["unit"][:4]) == ["rad", "rad/s", "rad", "rad/s"]
+    assert set(df[df["variable"] == "ybar"]["name"]) == {"motor angle", "motor velocity"}
+    assert list(df[(df["variable"] == "eta")]["name"][:2]) == ["sensor 1", "sensor 2"]
+    assert set(df[df["variable"].isin(["eta", "error"])]["unit"]) == {""}
     assert list(df["variable"].cat.categories) == ["x", "z", "xhat", "ybar", "e", "eta", "error"]
     sizes = {"x": 4, "z": 4, "xhat": 4, "ybar": 2, "e": 2, "eta": 2, "error": 1}
     assert len(df) == 2 * GRID.size * sum(sizes.values())
@@ -302,6 +315,34 @@ def test_to_xarray_dims_coords_and_values(arm):
     # a run picked by its label, a node by name
     sel = ds["eta"].sel(run=1).swap_dims(node="node_name").sel(node_name="sensor 2")
     np.testing.assert_array_equal(sel.to_numpy(), tr.eta[1, :, 1])
+    # the model's names and units as coordinates: a state picked by name
+    assert list(ds["state_name"].to_numpy()) == [
+        "motor angle",
+        "motor velocity",
+        "link angle",
+        "link velocity",
+    ]
+    assert list(ds["state_unit"].to_numpy()) == ["rad", "rad/s", "rad", "rad/s"]
+    assert list(ds["output_name"].to_numpy()) == ["motor angle", "motor velocity"]
+    assert list(ds["observer_state_unit"].to_numpy()) == ["rad", "rad/s", "rad", "rad/s"]
+    link = ds["x"].sel(run=0).swap_dims(state="state_name").sel(state_name="link angle")
+    np.testing.assert_array_equal(link.to_numpy(), tr.x[0, :, 2])
+
+
+def test_unnamed_models_keep_the_symbols_and_no_units(with_input):
+    ds = with_input.to_xarray()
+    assert with_input.to_pandas("transmissions").attrs["quantities"] == {"sent_y0": "y_1", "sent_u0": "u_1"}
+    assert list(ds["state_name"].to_numpy()) == ["x_1", "x_2"] and set(ds["state_unit"].to_numpy()) == {""}
+    assert list(ds["observer_state_name"].to_numpy()) == [
+        f"z_{k + 1}" for k in range(ds.sizes["observer_state"])
+    ]
+    grid = with_input.to_pandas("grid", variables="x")
+    assert list(grid["name"][:2]) == ["x_1", "x_2"] and set(grid["unit"]) == {""}
+
+
+def test_transmissions_table_names_what_each_column_sent(arm):
+    df = arm.to_pandas("transmissions")
+    assert df.attrs["quantities"] == {"sent_y0": "motor angle [rad]", "sent_y1": "motor velocity [rad/s]"}
 
 
 # -- reprs ------------------------------------------------------------------------------

@@ -364,3 +364,22 @@ def test_a_plant_sent_by_value_to_another_process_compiles_there():
     backend, times = json.loads(out.stdout.decode().strip().splitlines()[-1])
     assert backend == "engine"
     np.testing.assert_array_equal(times, simulate(pb, [1.0, 0.0], 10.0).transmissions.t)
+
+
+def test_the_systems_own_labels_become_the_plants_names_and_defaults_stay_unnamed():
+    system = ct.ss(
+        [[0, 1], [-2, -0.5]],
+        [[0, 0], [1, 0.3]],
+        [[1, 0], [0, 1]],
+        0,
+        states=["position", "velocity"],
+        inputs=["force", "wind"],
+        outputs=["range", "speed"],
+    )
+    plant = python_control_plant(system, disturbances=["wind"], outputs=["speed"])
+    assert plant.state_names == ("position", "velocity")
+    assert plant.output_names == ("speed",) and plant.input_names == ("force",)
+    assert [q.label for q in plant.quantities("y")] == ["speed"]
+    bare = python_control_plant(ct.ss([[0, 1], [-2, -0.5]], [[0], [1]], [[1, 0]], 0))
+    assert bare.state_names is bare.output_names is bare.input_names is None
+    assert [q.label for q in bare.quantities("x")] == ["$x_{1}$", "$x_{2}$"]

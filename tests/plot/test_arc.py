@@ -162,7 +162,11 @@ def test_renders(arcs_and_grid, ball, tmp_path):
     [
         ({"run": 2}, InputError, r"`run` must be in 0\.\.1; got 2"),
         ({"run": -1}, InputError, r"`run` must be in 0\.\.1; got -1"),
-        ({"run": "0"}, InputTypeError, r"`run` must be an integer; got '0' \(str\)"),
+        (
+            {"run": "0"},
+            InputTypeError,
+            r"`run` must be an integer or a sequence of integers; got '0' \(str\)",
+        ),
         ({"run": True}, InputTypeError, r"`run` must be an integer"),
         ({"what": "xi"}, InputError, r"`what` must be one of \['e', 'error', 'eta', .*\]; got 'xi'"),
         ({"what": 3}, InputTypeError, r"`what` must be a string; got 3 \(int\)"),

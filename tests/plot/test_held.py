@@ -201,7 +201,11 @@ def test_renders(arcs_only, tmp_path):
     ("kwargs", "error", "match"),
     [
         ({"run": 2}, InputError, r"`run` must be in 0\.\.1; got 2"),
-        ({"run": 1.0}, InputTypeError, r"`run` must be an integer; got 1\.0 \(float\)"),
+        (
+            {"run": 1.0},
+            InputTypeError,
+            r"`run` must be an integer or a sequence of integers; got 1\.0 \(float\)",
+        ),
         (
             {"nodes": 2},
             InputError,

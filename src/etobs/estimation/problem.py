@@ -23,6 +23,7 @@ from etobs.model.network import Network
 from etobs.model.node import InputNode, Node
 from etobs.model.observer import Observer
 from etobs.model.plant import Plant
+from etobs.model.quantities import Quantity
 from etobs.model.sampled import Sampled
 from etobs.model.signals import Signal, Sinusoid, as_signal
 
@@ -153,6 +154,28 @@ class EstimationProblem:
     def channel_names(self) -> tuple[str, ...]:
         """Names of the output nodes, then the input nodes."""
         return tuple(ch.name for ch in self.layout.channels)
+
+    def quantities(self, variable: str) -> tuple[Quantity, ...]:
+        """The entries of a result variable, with the names and units the model gives them.
+
+        Parameters
+        ----------
+        variable : {"x", "xhat", "z", "y", "ybar", "e", "u"}
+            ``x`` and ``xhat``: the plant's states; ``z``: the observer's; ``y``,
+            ``ybar`` and ``e``: the plant's outputs; ``u``: its known inputs.
+
+        Returns
+        -------
+        tuple of Quantity
+            One per entry, in order (:class:`~etobs.model.quantities.Quantity`).
+
+        """
+        if variable == "z":
+            return self.observer.quantities()
+        vector = {"x": "x", "xhat": "x", "y": "y", "ybar": "y", "e": "y", "u": "u"}.get(variable)
+        if vector is None:
+            raise InputError(f"`variable` must be one of x, xhat, z, y, ybar, e, u; got {variable!r}")
+        return self.plant.quantities(vector)
 
     @property
     def rule_names(self) -> tuple[str, ...]:

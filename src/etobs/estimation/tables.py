@@ -175,7 +175,9 @@ def transmissions(result: EstimationResult, window: Any = None) -> pd.DataFrame:
     )
     for name, col in zip(sent_column_names(result), sent_values(result, log)[keep].T, strict=True):
         df[name] = col
-    df.attrs.update(node_names=names, window=(lo, hi), hold=result.problem.hold)
+    df.attrs.update(
+        node_names=names, window=(lo, hi), hold=result.problem.hold, quantities=sent_quantities(result)
+    )
     return df
 
 
@@ -185,6 +187,20 @@ def sent_column_names(result: EstimationResult) -> list[str]:
     return [f"sent_y{k}" for k in range(result.problem.plant.n_y)] + sorted(
         (n for n in names if n.startswith("sent_u")), key=lambda n: int(n[6:])
     )
+
+
+def sent_quantities(result: EstimationResult) -> dict[str, str]:
+    """What each value column of the transmissions table holds: ``{"sent_y0": "motor angle [rad]", ...}``.
+
+    The model's names and units (:meth:`~etobs.estimation.EstimationProblem.quantities`),
+    else the symbols ``y_1``, ``u_1``.
+    """
+    out = {}
+    for column in sent_column_names(result):
+        kind, k = column[5], int(column[6:])
+        q = result.problem.quantities(kind)[k]
+        out[column] = f"{q.text} [{q.unit}]" if q.unit else q.text
+    return out
 
 
 def node_sent_values(result: EstimationResult, log: JumpLog, node: int) -> np.ndarray:
@@ -245,9 +261,25 @@ def grid(
         )
     data = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
     data["variable"] = pd.Categorical.from_codes(data["variable"], categories=list(VARIABLES))
+    # each row's quantity by name and unit (the model's, else the symbol x_1 and no unit)
+    names = {n: _component_text(result, n) for n in variables}
+    data["name"] = np.concatenate([np.tile([t for t, _ in names[p]], B * G) for p in variables])
+    data["unit"] = np.concatenate([np.tile([u for _, u in names[p]], B * G) for p in variables])
+    data["name"] = pd.Categorical(data["name"], categories=list(dict.fromkeys(data["name"])))
+    data["unit"] = pd.Categorical(data["unit"], categories=list(dict.fromkeys(data["unit"])))
     df = pd.DataFrame(data)
     df.attrs.update(window=(lo, hi), variables=dict(VARIABLES), node_names=_node_frame(result)[0])
     return df
+
+
+def _component_text(result: EstimationResult, variable: str) -> list[tuple[str, str]]:
+    """``(name, unit)`` of each component of a grid variable, as the grid table and the Dataset show them."""
+    pb = result.problem
+    if variable == "error":
+        return [("|x - xhat|", "")]
+    if variable == "eta":
+        return [(name, "") for name in pb.channel_names]
+    return [(q.text, q.unit) for q in pb.quantities(variable)]
 
 
 def to_xarray(result: EstimationResult) -> xr.Dataset:
@@ -273,6 +305,12 @@ def to_xarray(result: EstimationResult) -> xr.Dataset:
         "state": np.arange(pb.plant.n_x),
         "observer_state": np.arange(pb.observer.n_z),
         "output": np.arange(pb.plant.n_y),
+        "state_name": ("state", [n for n, _ in _component_text(result, "x")]),
+        "state_unit": ("state", [u for _, u in _component_text(result, "x")]),
+        "observer_state_name": ("observer_state", [n for n, _ in _component_text(result, "z")]),
+        "observer_state_unit": ("observer_state", [u for _, u in _component_text(result, "z")]),
+        "output_name": ("output", [n for n, _ in _component_text(result, "ybar")]),
+        "output_unit": ("output", [u for _, u in _component_text(result, "ybar")]),
         "node": np.arange(pb.n_channels),
         "node_name": ("node", names),
         "node_kind": ("node", kinds),
@@ -284,7 +322,8 @@ def to_xarray(result: EstimationResult) -> xr.Dataset:
         "backend_reason": result.backend_reason,
         "t_span": tuple(float(t) for t in sol.t_span),
         "hold": pb.hold,
-        "units": "those of the model (etobs attaches none)",
+        "units": "those of the model: the coordinates state_unit, observer_state_unit, output_unit "
+        "(empty where the model gives none)",
         "nodes": "numbered from 0 (node 0 is the paper's sensor 1): output nodes, then input nodes",
         "not_reached": "grid points after a run stopped, or outside the horizon, hold NaN with j = -1",
     }

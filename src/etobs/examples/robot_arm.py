@@ -37,6 +37,15 @@ X0_PAPER = (3.0, 2.0, 3.0, -2.0)
 #: Sector bound of the nonlinearity 3.3*sin(x_3): its slope lies in [-3.3, 3.3].
 SECTOR = 3.3
 
+#: The flexible-joint arm's states (Raff and Allgower's model, the paper's reference for it):
+#: motor angle and velocity, link angle and velocity; the sensors measure the motor's two.
+NAMES_AND_UNITS = {
+    "state_names": ("motor angle", "motor velocity", "link angle", "link velocity"),
+    "state_units": ("rad", "rad/s", "rad", "rad/s"),
+    "output_names": ("motor angle", "motor velocity"),
+    "output_units": ("rad", "rad/s"),
+}
+
 for _arr in (A, B, G, C, L_PAPER):
     _arr.setflags(write=False)
 
@@ -100,9 +109,16 @@ def robot_arm(
     amp_v = 0.02 * np.array([0.0, 1.0, 0.0, 1.0]) if v.flag("disturbance", disturbance) else np.zeros(4)
     amp_m = 0.01 * np.array([0.0, 1.0]) if v.flag("noise", noise) else np.zeros(2)
 
-    plant = Plant(f_p=_plant, h=_output, n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm")
+    plant = Plant(f_p=_plant, h=_output, n_x=4, n_y=2, n_u=1, n_v=4, name="robot arm", **NAMES_AND_UNITS)
     # the gain travels as the observer's parameters: another L compiles nothing
-    observer = Observer(f_o=_observer, n_z=4, name="polytopic Luenberger", params=gain.ravel())
+    observer = Observer(
+        f_o=_observer,
+        n_z=4,
+        name="polytopic Luenberger",
+        params=gain.ravel(),
+        state_names=NAMES_AND_UNITS["state_names"],
+        state_units=NAMES_AND_UNITS["state_units"],
+    )
     params = {
         k: _pair(k, val) for k, val in dict(sigma=sigma, c=c, b=b, a=a, ell=ell, eps=eps, eta0=eta0).items()
     }

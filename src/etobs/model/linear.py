@@ -31,6 +31,7 @@ def linear_plant(
     *,
     E: Any = None,
     name: str = "linear plant",
+    **names_and_units: Any,
 ) -> Plant:
     """The plant ``x' = A x + B u + E v``, ``y = C x`` (eq. (2) with linear ``f_p`` and ``h``).
 
@@ -48,6 +49,9 @@ def linear_plant(
     E : array_like, shape (n_x, n_v), optional
         Disturbance matrix (default: no disturbance, ``n_v = 0``).
     name : str
+    **names_and_units
+        ``state_names``, ``state_units``, ``output_names``, ``output_units``,
+        ``input_names``, ``input_units``, as for :class:`~etobs.model.Plant`.
 
     Returns
     -------
@@ -90,7 +94,9 @@ def linear_plant(
         return p[offset : offset + n_y * n_x].reshape((n_y, n_x)) @ x
 
     params = np.concatenate([a.ravel(), b.ravel(), e.ravel(), c.ravel()])
-    return Plant(f_p=f_p, h=h, n_x=n_x, n_y=n_y, n_u=n_u, n_v=n_v, name=name, params=params)
+    return Plant(
+        f_p=f_p, h=h, n_x=n_x, n_y=n_y, n_u=n_u, n_v=n_v, name=name, params=params, **names_and_units
+    )
 
 
 def linear_luenberger(A: Any, L: Any, B: Any = None, *, name: str = "luenberger") -> Observer:

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from etobs import _validate as v
 from etobs.compile.functions import with_params
+from etobs.model.quantities import Quantity, names, quantities
 
 ObserverFn = Callable[..., np.ndarray]
 
@@ -33,6 +34,9 @@ class Observer:
         A parameter vector: when given, ``f_o`` and ``psi`` take it as their last
         argument (``f_o(t, z, u, ybar, yhat, p)``, ``psi(z, p)``); numbers kept here
         change without a recompile.
+    state_names, state_units : sequence of str, optional
+        Names and units of the entries of ``z`` (``n_z`` each), for tables, the xarray
+        Dataset and plots. Default: the symbols ``z_1 .. z_nz``, no unit.
 
     Attributes
     ----------
@@ -60,6 +64,8 @@ class Observer:
     psi: Callable[..., np.ndarray] | None = None
     name: str = "observer"
     params: Any = None
+    state_names: tuple[str, ...] | None = None
+    state_units: tuple[str, ...] | None = None
     gain_shape: tuple[int, int] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -68,6 +74,19 @@ class Observer:
         if self.psi is not None:
             v.function("psi", self.psi)
         object.__setattr__(self, "params", v.params("params", self.params))
+        for key in ("state_names", "state_units"):
+            object.__setattr__(self, key, names(key, getattr(self, key), self.n_z))
+
+    def quantities(self) -> tuple[Quantity, ...]:
+        """The entries of ``z`` with their names and units (symbols ``z_1 ..`` without names).
+
+        Returns
+        -------
+        tuple of Quantity
+            One per entry of ``z``.
+
+        """
+        return quantities("z", self.n_z, self.state_names, self.state_units)
 
     def call_f_o(
         self, t: float, z: np.ndarray, u: np.ndarray, ybar: np.ndarray, yhat: np.ndarray

@@ -10,7 +10,8 @@ import numpy as np
 
 from etobs import _validate as v
 from etobs.compile.functions import with_params
-from etobs.errors import InputTypeError
+from etobs.errors import InputError, InputTypeError
+from etobs.model.quantities import Quantity, names, quantities
 
 PlantFn = Callable[..., np.ndarray]
 OutputFn = Callable[..., np.ndarray]
@@ -37,6 +38,13 @@ class Plant:
         A parameter vector, as python-control's ``params``: when given, ``f_p`` and
         ``h`` take it as their last argument (``f_p(t, x, u, v, p)``, ``h(x, p)``).
         Numbers kept here, not in the functions' code, change without a recompile.
+    state_names, output_names, input_names : sequence of str, optional
+        Names of the entries of ``x`` (``n_x`` names), ``y`` (``n_y``) and ``u``
+        (``n_u``): tables, the xarray Dataset and the plots use them. Default: the
+        paper's symbols (``x_1``, ``y_1``, ``u_1``).
+    state_units, output_units, input_units : sequence of str, optional
+        Their units (``"rad"``, ``"m/s"``), shown with them (``"motor angle [rad]"``).
+        Default: none.
 
     Examples
     --------
@@ -45,6 +53,15 @@ class Plant:
     ...             lambda x, p: x[:1], n_x=2, n_y=1, params=[1.0])
     >>> vdp.call_f_p(0.0, np.array([2.0, 0.0]), np.zeros(0), np.zeros(0)).tolist()
     [0.0, -2.0]
+
+    Named, with units:
+
+    >>> vdp = Plant(vdp.f_p, vdp.h, n_x=2, n_y=1, params=[1.0], state_names=["position", "velocity"],
+    ...             state_units=["m", "m/s"])
+    >>> [q.axis_label for q in vdp.quantities("x")]
+    ['position [m]', 'velocity [m/s]']
+    >>> vdp.quantities("y")[0].label
+    '$y_{1}$'
 
     """
 
@@ -56,6 +73,12 @@ class Plant:
     n_v: int = 0
     name: str = "plant"
     params: Any = None
+    state_names: tuple[str, ...] | None = None
+    state_units: tuple[str, ...] | None = None
+    output_names: tuple[str, ...] | None = None
+    output_units: tuple[str, ...] | None = None
+    input_names: tuple[str, ...] | None = None
+    input_units: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         for name in ("f_p", "h"):
@@ -72,6 +95,29 @@ class Plant:
         v.integer("n_u", self.n_u, lower=0)
         v.integer("n_v", self.n_v, lower=0)
         object.__setattr__(self, "params", v.params("params", self.params))
+        for vector, size in (("state", self.n_x), ("output", self.n_y), ("input", self.n_u)):
+            for kind in ("names", "units"):
+                key = f"{vector}_{kind}"
+                object.__setattr__(self, key, names(key, getattr(self, key), size))
+
+    def quantities(self, vector: str) -> tuple[Quantity, ...]:
+        """The entries of ``vector`` (``"x"``, ``"y"`` or ``"u"``) with their names and units.
+
+        Parameters
+        ----------
+        vector : {"x", "y", "u"}
+
+        Returns
+        -------
+        tuple of Quantity
+            One per entry, in order.
+
+        """
+        which = {"x": ("state", self.n_x), "y": ("output", self.n_y), "u": ("input", self.n_u)}
+        if vector not in which:
+            raise InputError(f"`vector` must be 'x', 'y' or 'u'; got {vector!r}")
+        key, size = which[vector]
+        return quantities(vector, size, getattr(self, f"{key}_names"), getattr(self, f"{key}_units"))
 
     def call_f_p(self, t: float, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``f_p`` of one run, with ``params`` when there are any."""

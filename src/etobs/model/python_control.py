@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import types
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -150,8 +151,33 @@ def python_control_plant(
             else " (every output of the system has feedthrough)"
         )
         check_no_feedthrough("D", D[list(outs), :], [out_labels[k] for k in outs], in_labels, hint)
-        return linear_plant(A, B[:, list(known)], C[list(outs), :], E=B[:, list(dist)], name=name)
-    return _nonlinear_plant(sys, known, dist, outs, params, name)
+        plant = linear_plant(A, B[:, list(known)], C[list(outs), :], E=B[:, list(dist)], name=name)
+    else:
+        plant = _nonlinear_plant(sys, known, dist, outs, params, name)
+    return replace(plant, **_names(sys, in_labels, out_labels, known, outs))  # type: ignore[arg-type]
+
+
+def _names(
+    sys: Any, in_labels: list[str], out_labels: list[str], known: tuple[int, ...], outs: tuple[int, ...]
+) -> dict[str, tuple[str, ...] | None]:
+    """The system's state, output and known-input labels as the plant's names, where the user gave them.
+
+    python-control labels what the user left unnamed ``x[0]``, ``y[0]``, ``u[0]``; those
+    stay unnamed (the plots then show ``x_1``, as for any plant).
+    """
+
+    def given(labels: list[str], letter: str) -> tuple[str, ...] | None:
+        default = [f"{letter}[{k}]" for k in range(len(labels))]
+        return tuple(labels) if labels and labels != default else None
+
+    states = given(list(sys.state_labels), "x")
+    outputs = given(out_labels, "y")
+    inputs = given(in_labels, "u")
+    return {
+        "state_names": states,
+        "output_names": None if outputs is None else tuple(outputs[k] for k in outs),
+        "input_names": None if inputs is None else tuple(inputs[k] for k in known) or None,
+    }
 
 
 def _labels(sys: Any, params: dict[str, Any] | None) -> tuple[list[str], list[str]]:

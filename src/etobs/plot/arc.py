@@ -21,7 +21,9 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.estimation.result import EstimationResult
 from etobs.hybrid.solution import HybridArc, HybridSolution
-from etobs.plot.figures import _figure, _node_name, _run
+from etobs.plot.figures import _node_name, _run
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared
+from etobs.plot.layout import window as check_window
 
 #: What ``plot_hybrid_arc`` can draw from an :class:`EstimationResult`, with its label.
 _VARIABLES = {
@@ -122,8 +124,17 @@ def _estimation_rows(result: EstimationResult, run: int, what: str, components: 
         labels = tuple(rf"$\eta$ ({_node_name(result, i)})" for i in comps)
     else:
         comps = _components("components", components, values.shape[1])
-        labels = tuple(f"${_VARIABLES[what]}_{{{k + 1}}}$" for k in comps)
+        labels = tuple(_label(result, what, k) for k in comps)
     return _Rows(tr.t, tr.j, values[:, comps], labels, refined)
+
+
+def _label(result: EstimationResult, what: str, k: int) -> str:
+    """Legend label of entry ``k`` of ``what``: the model's name for it, else the paper's symbol."""
+    q = result.problem.quantities(what)[k]
+    if not q.name:
+        return f"${_VARIABLES[what]}_{{{k + 1}}}$"
+    suffix = {"x": "", "xhat": " estimate", "z": "", "ybar": ", held", "e": ", error e"}[what]
+    return q.name + suffix + (f" [{q.unit}]" if q.unit else "")
 
 
 def _hybrid_rows(result: HybridSolution | HybridArc, run: int, what: str, components: Any) -> _Rows:
@@ -160,23 +171,36 @@ def flows_and_jumps(t: np.ndarray, j: np.ndarray, y: np.ndarray) -> tuple[np.nda
     return tf, yf, jumps.reshape(-1, 2, 2)
 
 
-def _draw(ax: Any, t: np.ndarray, j: np.ndarray, y: np.ndarray, flow: Any, jump: Any, label: str) -> None:
-    """Flows solid, jumps dashed (HyEQ's convention); one artist each."""
+def _draw(
+    ax: Any,
+    t: np.ndarray,
+    j: np.ndarray,
+    y: np.ndarray,
+    flow: Any,
+    jump: Any,
+    label: str,
+    drawn: dict[str, list[Any]],
+) -> None:
+    """Flows solid, jumps dashed (HyEQ's convention); one artist each, added to ``drawn``."""
     from matplotlib.collections import LineCollection
 
     tf, yf, jumps = flows_and_jumps(t, j, y)
-    ax.plot(tf, yf, color=flow, lw=1.2, label=label)
-    ax.add_collection(LineCollection(list(jumps), colors=[jump], linestyles="--", linewidths=0.9))
+    drawn["flows"] += ax.plot(tf, yf, color=flow, lw=1.2, label=label)
+    drawn["jumps"].append(
+        ax.add_collection(LineCollection(list(jumps), colors=[jump], linestyles="--", linewidths=0.9))
+    )
 
 
 def plot_hybrid_arc(
     result: EstimationResult | HybridSolution | HybridArc,
-    run: int = 0,
+    run: Any = 0,
     *,
     what: str | None = None,
     components: Any = None,
     log: bool | None = None,
-) -> tuple[Any, np.ndarray]:
+    ax: Any = None,
+    window: Any = None,
+) -> Drawn:
     """One run's hybrid arc in hybrid time ``(t, j)``: flows solid, jumps dashed (HyEQ).
 
     The top panel draws the chosen variable against ``t``; each jump is a dashed segment
@@ -190,24 +214,31 @@ def plot_hybrid_arc(
         Simulated with ``save=SaveAt(steps=True)`` (the default). When the save grid was
         kept too, its points are added to the arc's to draw the flows smoothly (the
         title says so); the jumps are the arc's.
-    run : int
-        Which run (0 for a HybridArc).
+    run : int or sequence of int
+        Which run (0 for a HybridArc), or several overlaid: one colour per run, flows
+        and jumps alike, named in the legend.
     what : str, optional
         For an EstimationResult: ``"error"`` (default, ``|x - xhat|``), ``"x"``,
         ``"xhat"``, ``"z"``, ``"ybar"``, ``"e"`` (``e = ybar - ytilde``, eq. (49)) or
         ``"eta"`` (one curve per node with a dynamic rule). For a HybridSolution or a
-        HybridArc: ``"x"`` (default), the hybrid state.
+        HybridArc: ``"x"`` (default), the hybrid state. Entries carry the model's names
+        and units when it gives them.
     components : int or sequence of int, optional
         Entries of the variable to draw (indices from 0; for ``"eta"``, nodes). Default:
         all.
     log : bool, optional
         Logarithmic value axis; default only for ``"error"``, as in :func:`plot_error`.
+    ax : sequence of two Axes, optional
+        The variable's and the hybrid time domain's; default a new figure.
+    window : (float, float), optional
+        Draw only the points with ``t0 <= t <= t1`` (and the jumps between them).
 
     Returns
     -------
-    fig : matplotlib.figure.Figure
-    axes : ndarray of Axes, shape (2,)
-        The variable against ``t``, then ``j`` against ``t``.
+    Drawn
+        ``fig, axes`` (the variable against ``t``, then ``j`` against ``t``); artists
+        ``"flows"`` and ``"jumps"`` (a line and a collection per run and entry) and
+        ``"domain"`` (the ``j`` panel's, per run).
 
     Examples
     --------
@@ -217,11 +248,14 @@ def plot_hybrid_arc(
     """
     if what is not None and not isinstance(what, str):
         raise InputTypeError(f"`what` must be a string; got {v.shown(what)} ({type(what).__name__})")
+    span = check_window(window)
     if isinstance(result, EstimationResult):
-        rows = _estimation_rows(result, _run(result.n_runs, run), what or "error", components)
+        chosen = runs(result.n_runs, run)
         name = what or "error"
+        rows = [_estimation_rows(result, r, name, components) for r in chosen]
     elif isinstance(result, HybridSolution | HybridArc):
-        rows = _hybrid_rows(result, run, what or "x", components)
+        chosen = (run,) if isinstance(result, HybridArc) else runs(result.n_runs, run)
+        rows = [_hybrid_rows(result, r, what or "x", components) for r in chosen]
         name = "x"
     else:
         raise InputTypeError(
@@ -230,27 +264,54 @@ def plot_hybrid_arc(
         )
     if log is not None:
         v.flag("log", log)
-    fig, axes = _figure(2, 4.4, height_ratios=[3.0, 1.0])
-    ax, ax_j = axes
-    single = rows.values.shape[1] == 1
-    for k, label in enumerate(rows.labels):
-        # one variable: HyEQ's colours (blue flows, red jumps); several: one colour each
-        flow = "C0" if single else f"C{k % 10}"
-        _draw(ax, rows.t, rows.j, rows.values[:, k], flow, "C3" if single else flow, label)
+    rows = [_in(rs, span) for rs in rows]
+    fig, axes, own = canvas(ax, 2, 4.4, height_ratios=[3.0, 1.0])
+    if shared(axes):
+        raise InputError("`ax` must be two Axes for plot_hybrid_arc: the variable's, then j's; got one")
+    top, ax_j = axes
+    drawn: dict[str, list[Any]] = {"flows": [], "jumps": [], "domain": []}
+    single = rows[0].values.shape[1] == 1
+    n_jumps = 0
+    for r_k, (r, rs) in enumerate(zip(chosen, rows, strict=True)):
+        several = f" (run {r})" if len(chosen) > 1 else ""
+        for k, label in enumerate(rs.labels):
+            # one variable: HyEQ's colours (blue flows, red jumps); several: one colour each
+            if len(chosen) > 1:
+                flow = jump = run_color(r_k, len(chosen), "C0")
+            else:
+                flow = "C0" if single else f"C{k % 10}"
+                jump = "C3" if single else flow
+            _draw(top, rs.t, rs.j, rs.values[:, k], flow, jump, label + several, drawn)
+        color = "0.25" if len(chosen) == 1 else run_color(r_k, len(chosen), "C0")
+        part: dict[str, list[Any]] = {"flows": [], "jumps": []}
+        _draw(ax_j, rs.t, rs.j, rs.j, color, "C3" if len(chosen) == 1 else color, "j" + several, part)
+        drawn["domain"] += part["flows"] + part["jumps"]
+        n_jumps += int(np.count_nonzero(np.diff(rs.j)))
     if log if log is not None else name == "error":
-        ax.set_yscale("log")
-    ax.autoscale_view()
-    ax.set_ylabel(rows.labels[0] if single else f"${_VARIABLES[name]}$")
-    if not single:
-        ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(rows.labels)))
-    ax.grid(alpha=0.3, which="both")
-    _draw(ax_j, rows.t, rows.j, rows.j, "0.25", "C3", "j")
+        top.set_yscale("log")
+    top.autoscale_view()
+    top.set_ylabel(rows[0].labels[0] if single else f"${_VARIABLES[name]}$")
+    if not single or len(chosen) > 1:
+        top.legend(loc="upper right", fontsize="small", ncol=min(4, len(rows[0].labels)))
+    top.grid(alpha=0.3, which="both")
     ax_j.autoscale_view()
     ax_j.set_ylabel("j")
     ax_j.set_xlabel("t [s]")
     ax_j.yaxis.get_major_locator().set_params(integer=True)
     ax_j.grid(alpha=0.3)
-    n_jumps = int(np.count_nonzero(np.diff(rows.j)))
-    note = ", flows refined with the save grid" if rows.refined else ""
-    fig.suptitle(f"Hybrid arc of run {run}: flows solid, {n_jumps} jumps dashed{note}")
-    return fig, axes
+    if span is not None:
+        for a in axes:
+            a.set_xlim(*span)
+    if own:
+        note = ", flows refined with the save grid" if rows[0].refined else ""
+        which = f"run {chosen[0]}" if len(chosen) == 1 else "runs " + ", ".join(map(str, chosen))
+        fig.suptitle(f"Hybrid arc of {which}: flows solid, {n_jumps} jumps dashed{note}")
+    return Drawn(fig, axes, drawn)
+
+
+def _in(rows: _Rows, span: tuple[float, float] | None) -> _Rows:
+    """The rows with ``t`` in ``span``."""
+    if span is None:
+        return rows
+    keep = in_window(rows.t, span)
+    return _Rows(rows.t[keep], rows.j[keep], rows.values[keep], rows.labels, rows.refined)

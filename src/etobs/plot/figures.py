@@ -1,7 +1,10 @@
 """The paper's three figures (section 8) from an :class:`~etobs.estimation.EstimationResult`.
 
-Each function returns the :class:`matplotlib.figure.Figure` and its axes; nothing is
-shown or saved here. ``pyplot`` is never imported, so these work headless.
+Each function draws one run or several overlaid (``run=[0, 3]``, a legend names them),
+optionally in a time window (``window=(t0, t1)``), into new axes or the caller's
+(``ax=``), and returns a :class:`~etobs.plot.layout.Drawn`: ``fig, axes`` and the artists
+by role. States and outputs carry the model's names and units
+(:meth:`~etobs.estimation.EstimationProblem.quantities`). ``pyplot`` is never imported.
 """
 
 from __future__ import annotations
@@ -10,30 +13,24 @@ from typing import Any
 
 import numpy as np
 
-from etobs._validate import shown
-from etobs.errors import InputError, InputTypeError
+from etobs._validate import flag
+from etobs.errors import InputTypeError
 from etobs.estimation.metrics import inter_event_times
 from etobs.estimation.result import EstimationResult, Trajectory
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, window
 
 
-def _figure(nrows: int, height: float, height_ratios: list[float] | None = None) -> tuple[Any, Any]:
-    try:
-        from matplotlib.figure import Figure
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("plotting needs matplotlib: pip install 'etobs[plot]'") from exc
-    fig = Figure(figsize=(7.0, height), layout="constrained")
-    grid = {"height_ratios": height_ratios} if height_ratios is not None else None
-    axes = fig.subplots(nrows, 1, sharex=True, squeeze=False, gridspec_kw=grid)[:, 0]
-    return fig, axes
+def _check(result: Any) -> EstimationResult:
+    if not isinstance(result, EstimationResult):
+        raise InputTypeError(f"`result` must be an EstimationResult; got {type(result).__name__}")
+    return result
 
 
 def _run(n_runs: int, run: Any) -> int:
-    """``run`` checked against a batch of ``n_runs`` runs."""
+    """One run's index, checked against a batch of ``n_runs`` runs."""
     if isinstance(run, bool) or not isinstance(run, int | np.integer):
-        raise InputTypeError(f"`run` must be an integer; got {shown(run)} ({type(run).__name__})")
-    if not 0 <= run < n_runs:
-        raise InputError(f"`run` must be in 0..{n_runs - 1}; got {run}")
-    return int(run)
+        raise InputTypeError(f"`run` must be an integer here; got {run!r} ({type(run).__name__})")
+    return runs(n_runs, run)[0]
 
 
 def _node_name(result: EstimationResult, node: int) -> str:
@@ -41,77 +38,216 @@ def _node_name(result: EstimationResult, node: int) -> str:
     return result.problem.channel_names[node]
 
 
-def _trajectory(result: EstimationResult, run: int) -> Trajectory:
-    run = _run(result.n_runs, run)
+def _trajectory(result: EstimationResult, run: int, span: tuple[float, float] | None) -> Trajectory:
+    """Run ``run`` on the save grid (when kept) or its arc, the points in ``span`` only."""
     if result.solution.grid is not None:
         g = result.on_grid()
-        keep = np.isfinite(g.x[run]).all(axis=1)
-        return Trajectory(
-            t=g.t[run][keep],
-            j=g.j[run][keep],
-            x=g.x[run][keep],
-            z=g.z[run][keep],
-            xhat=g.xhat[run][keep],
-            ybar=g.ybar[run][keep],
-            e=g.e[run][keep],
-            eta=g.eta[run][keep],
-        )
-    return result.arc(run)
+        tr = Trajectory(
+            t=g.t[run], j=g.j[run], x=g.x[run], z=g.z[run], xhat=g.xhat[run], ybar=g.ybar[run], e=g.e[run],
+            eta=g.eta[run],
+        )  # fmt: skip
+        keep = np.isfinite(tr.x).all(axis=1)
+    else:
+        tr = result.arc(run)
+        keep = np.ones(tr.t.shape, dtype=bool)
+    keep &= in_window(tr.t, span)
+    return Trajectory(**{k: getattr(tr, k)[keep] for k in ("t", "j", "x", "z", "xhat", "ybar", "e", "eta")})
 
 
-def plot_states(result: EstimationResult, run: int = 0) -> tuple[Any, np.ndarray]:
-    """Plant states ``x_k`` and estimates ``xhat_k`` against time, one panel per state."""
-    tr = _trajectory(result, run)
-    n_x = tr.x.shape[-1]
-    fig, axes = _figure(n_x, 1.6 * n_x + 0.6)
-    for k, ax in enumerate(axes):
-        ax.plot(tr.t, tr.x[:, k], color="C0", lw=1.2, label=f"$x_{k + 1}$")
-        ax.plot(tr.t, tr.xhat[:, k], color="C1", lw=1.0, ls="--", label=rf"$\hat x_{k + 1}$")
-        ax.legend(loc="upper right", fontsize="small", ncol=2)
-        ax.grid(alpha=0.3)
+def _time_axis(axes: np.ndarray, span: tuple[float, float] | None) -> None:
     axes[-1].set_xlabel("t [s]")
-    fig.suptitle("State $x$ and state estimate $\\hat x$")
-    return fig, axes
+    if span is not None:
+        for ax in axes:
+            ax.set_xlim(*span)
 
 
-def plot_error(result: EstimationResult, run: int = 0, *, log: bool = True) -> tuple[Any, Any]:
-    """Norm of the estimation error ``|x - xhat|`` against time."""
-    tr = _trajectory(result, run)
-    fig, axes = _figure(1, 3.0)
-    ax = axes[0]
-    ax.plot(tr.t, tr.error, color="C3", lw=1.0)
+def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, window: Any = None) -> Drawn:
+    """Plant states ``x_k`` and estimates ``xhat_k`` against time, one panel per state.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        With a save grid (drawn from it) or the arcs.
+    run : int or sequence of int
+        The run, or several overlaid (one colour each, named in the legend).
+    ax : Axes or sequence of Axes, optional
+        One per state, to draw into (a figure of the caller's); default a new figure.
+    window : (float, float), optional
+        Draw only ``t0 <= t <= t1``.
+
+    Returns
+    -------
+    Drawn
+        ``fig, axes`` (one per state); artists ``"x"`` and ``"xhat"``, one line per run
+        and state. Panels are labelled with the states' names and units.
+
+    Examples
+    --------
+    >>> fig, axes = plot_states(result, run=[0, 1], window=(0.0, 2.0))  # doctest: +SKIP
+
+    """
+    result = _check(result)
+    chosen, span = runs(result.n_runs, run), window_(window)
+    quantities = result.problem.quantities("x")
+    n_x = len(quantities)
+    fig, axes, own = canvas(ax, n_x, 1.6 * n_x + 0.6)
+    overlaid = shared(axes)  # one Axes for every state: a colour per state, units in the legend
+    drawn: dict[str, list[Any]] = {"x": [], "xhat": []}
+    for r_k, r in enumerate(chosen):
+        tr = _trajectory(result, r, span)
+        several = f" (run {r})" if len(chosen) > 1 else ""
+        for k, (a, q) in enumerate(zip(axes, quantities, strict=True)):
+            if overlaid:
+                color = hat_color = f"C{k % 10}"
+            else:
+                color = run_color(r_k, len(chosen), "C0")
+                hat_color = color if len(chosen) > 1 else "C1"
+            unit = f" [{q.unit}]" if overlaid and q.unit else ""
+            hat = f"{q.name} estimate" if q.name else rf"$\hat x_{{{k + 1}}}$"
+            drawn["x"] += a.plot(tr.t, tr.x[:, k], color=color, lw=1.2, label=q.label + unit + several)
+            drawn["xhat"] += a.plot(
+                tr.t, tr.xhat[:, k], color=hat_color, lw=1.0, ls="--", label=hat + unit + several
+            )
+    for a, q in zip(axes, quantities, strict=True):
+        if overlaid:
+            units = {q.unit for q in quantities}
+            a.set_ylabel(f"x [{units.pop()}]" if len(units) == 1 and "" not in units else "x")
+        else:
+            a.set_ylabel(q.axis_label if q.name else (f"[{q.unit}]" if q.unit else ""))
+        a.legend(loc="upper right", fontsize="small", ncol=2)
+        a.grid(alpha=0.3)
+    _time_axis(axes, span)
+    if own:
+        fig.suptitle("State $x$ (solid) and state estimate $\\hat x$ (dashed)")
+    return Drawn(fig, axes, drawn)
+
+
+def plot_error(
+    result: EstimationResult, run: Any = 0, *, log: bool = True, ax: Any = None, window: Any = None
+) -> Drawn:
+    """Norm of the estimation error ``|x - xhat|`` against time.
+
+    Parameters
+    ----------
+    result : EstimationResult
+    run : int or sequence of int
+        The run, or several overlaid (named in the legend).
+    log : bool
+        Logarithmic value axis.
+    ax : Axes, optional
+        To draw into; default a new figure.
+    window : (float, float), optional
+        Draw only ``t0 <= t <= t1``.
+
+    Returns
+    -------
+    Drawn
+        ``fig, ax``; artists ``"error"``, one line per run.
+
+    Examples
+    --------
+    >>> fig, ax = plot_error(result, log=False)  # doctest: +SKIP
+
+    """
+    result = _check(result)
+    chosen, span = runs(result.n_runs, run), window_(window)
+    flag("log", log)
+    fig, axes, own = canvas(ax, 1, 3.0)
+    a = axes[0]
+    lines: list[Any] = []
+    for r_k, r in enumerate(chosen):
+        tr = _trajectory(result, r, span)
+        label = f"run {r}" if len(chosen) > 1 else None
+        lines += a.plot(tr.t, tr.error, color=run_color(r_k, len(chosen), "C3"), lw=1.0, label=label)
     if log:
-        ax.set_yscale("log")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel(r"$|x - \hat x|$")
-    ax.grid(alpha=0.3, which="both")
-    fig.suptitle(r"Norm of the state estimation error $|\xi| = |x - \hat x|$")
-    return fig, ax
+        a.set_yscale("log")
+    a.set_ylabel(r"$|x - \hat x|$")
+    a.grid(alpha=0.3, which="both")
+    if len(chosen) > 1:
+        a.legend(fontsize="small")
+    _time_axis(axes, span)
+    if own:
+        fig.suptitle(r"Norm of the state estimation error $|\xi| = |x - \hat x|$")
+    return Drawn(fig, a, {"error": lines})
 
 
 def plot_inter_event_times(
-    result: EstimationResult, run: int = 0, *, logy: bool = False
-) -> tuple[Any, np.ndarray]:
+    result: EstimationResult, run: Any = 0, *, logy: bool = False, ax: Any = None, window: Any = None
+) -> Drawn:
     """Time since the node's previous transmission, at each transmission, one panel per node.
 
-    ``logy``: a logarithmic time axis, so that millisecond intervals stay visible next to
-    gaps of seconds.
+    Parameters
+    ----------
+    result : EstimationResult
+    run : int or sequence of int
+        The run, or several overlaid (markers, one colour per run, named in the legend).
+    logy : bool
+        A logarithmic time axis, so that millisecond intervals stay visible next to gaps
+        of seconds.
+    ax : Axes or sequence of Axes, optional
+        One per node; default a new figure.
+    window : (float, float), optional
+        Only the transmissions at ``t0 <= t <= t1`` (each with its gap to the previous
+        one, which may lie before ``t0``).
+
+    Returns
+    -------
+    Drawn
+        ``fig, axes`` (one per node); artists ``"gaps"`` (one stem container, or with
+        several runs one marker line, per run and node) and ``"min"`` (the dotted line
+        at each node's smallest gap).
+
+    Examples
+    --------
+    >>> fig, axes = plot_inter_event_times(result, logy=True)  # doctest: +SKIP
+
     """
-    run = _run(result.n_runs, run)
+    result = _check(result)
+    chosen, span = runs(result.n_runs, run), window_(window)
+    flag("logy", logy)
     N = result.n_nodes
-    fig, axes = _figure(N, 1.8 * N + 0.6)
-    for i, ax in enumerate(axes):
-        times = result.transmission_times(run, i)
-        gaps = inter_event_times(result, run, i)
+    fig, axes, own = canvas(ax, N, 1.8 * N + 0.6)
+    drawn: dict[str, list[Any]] = {"gaps": [], "min": []}
+    overlaid = shared(axes)  # every node in one Axes: markers, a colour and a label per node
+    for i, a in enumerate(axes):
+        smallest = np.inf
         name = _node_name(result, i)
-        if gaps.size:
-            ax.stem(times[1:], gaps, basefmt=" ")
-            ax.axhline(gaps.min(), color="C3", lw=0.8, ls=":", label=f"min {gaps.min():.3f} s")
-            ax.legend(loc="upper right", fontsize="small")
-        ax.set_ylabel(f"{name}\n[s]")
+        for r_k, r in enumerate(chosen):
+            times = result.transmission_times(r, i)[1:]
+            gaps = inter_event_times(result, r, i)
+            keep = in_window(times, span)
+            times, gaps = times[keep], gaps[keep]
+            if not gaps.size:
+                continue
+            smallest = min(smallest, float(gaps.min()))
+            if len(chosen) == 1 and not overlaid:
+                drawn["gaps"].append(a.stem(times, gaps, basefmt=" "))
+            else:
+                color = f"C{i % 10}" if overlaid else run_color(r_k, len(chosen), "C0")
+                marker = "os^Dv<>"[(i if overlaid else r_k) % 7]
+                label = ", ".join(([name] if overlaid else []) + ([f"run {r}"] if len(chosen) > 1 else []))
+                drawn["gaps"] += a.plot(
+                    times, gaps, ls="none", marker=marker, ms=4, mfc="none", color=color, label=label
+                )
+        if np.isfinite(smallest):
+            drawn["min"].append(
+                a.axhline(
+                    smallest,
+                    color=f"C{i % 10}" if overlaid else "C3",
+                    lw=0.8,
+                    ls=":",
+                    label=(f"{name}: " if overlaid else "") + f"min {smallest:.3g} s",
+                )
+            )
+            a.legend(loc="upper right", fontsize="small")
+        a.set_ylabel("inter-event time [s]" if overlaid else f"{name}\n[s]")
         if logy:
-            ax.set_yscale("log")
-        ax.grid(alpha=0.3, which="both" if logy else "major")
-    axes[-1].set_xlabel("t [s]")
-    fig.suptitle("Inter-transmission times")
-    return fig, axes
+            a.set_yscale("log")
+        a.grid(alpha=0.3, which="both" if logy else "major")
+    _time_axis(axes, span)
+    if own:
+        fig.suptitle("Inter-transmission times")
+    return Drawn(fig, axes, drawn)
+
+
+window_ = window  # the parameter `window` shadows the checker inside the functions

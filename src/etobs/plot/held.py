@@ -12,7 +12,9 @@ from etobs.estimation.result import EstimationResult
 from etobs.estimation.tables import node_sent_values
 from etobs.model.signals import Zero
 from etobs.plot.arc import solution_rows
-from etobs.plot.figures import _figure, _node_name, _run
+from etobs.plot.figures import _node_name
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared
+from etobs.plot.layout import window as check_window
 
 
 def _nodes(result: EstimationResult, nodes: Any) -> tuple[int, ...]:
@@ -63,18 +65,44 @@ def _steps(
 
 
 def _labels(result: EstimationResult, node: int) -> list[tuple[str, str]]:
-    """``(held, measured)`` legend labels of each of the node's components (1-based, as the paper)."""
+    """``(held, measured)`` legend labels of each of the node's components.
+
+    The model's names when it gives them (``"motor angle, held"``), else the paper's
+    symbols, 1-based (``ybar_1`` over ``y_1``, in math text).
+    """
     pb = result.problem
     ch = pb.layout.channels[node]
-    if ch.kind == "u":
-        return [(rf"$\bar u_{{{k + 1}}}$", f"$u_{{{k + 1}}}$") for k in ch.index]
-    y = "y" if isinstance(pb.m, Zero) else r"\tilde y"
-    if pb.hold == "innovation":  # Remark 3: the node sends ytilde - yhat
-        return [(rf"$\bar y_{{{k + 1}}}$", rf"${y}_{{{k + 1}}} - \hat y_{{{k + 1}}}$") for k in ch.index]
-    return [(rf"$\bar y_{{{k + 1}}}$", f"${y}_{{{k + 1}}}$") for k in ch.index]
+    kind = "u" if ch.kind == "u" else "y"
+    quantities = [pb.quantities(kind)[k] for k in ch.index]
+    noisy = kind == "y" and not isinstance(pb.m, Zero)
+    innovation = kind == "y" and pb.hold == "innovation"  # Remark 3: the node sends ytilde - yhat
+    out = []
+    for k, q in zip(ch.index, quantities, strict=True):
+        if q.name:
+            measured = q.name + (", measured" if noisy else "") + (" - estimate" if innovation else "")
+            out.append((f"{q.name}, held", measured))
+            continue
+        y = "y" if not noisy else r"\tilde y"
+        if kind == "u":
+            out.append((rf"$\bar u_{{{k + 1}}}$", f"$u_{{{k + 1}}}$"))
+        elif innovation:
+            out.append((rf"$\bar y_{{{k + 1}}}$", rf"${y}_{{{k + 1}}} - \hat y_{{{k + 1}}}$"))
+        else:
+            out.append((rf"$\bar y_{{{k + 1}}}$", f"${y}_{{{k + 1}}}$"))
+    return out
 
 
-def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None) -> tuple[Any, np.ndarray]:
+def _unit(result: EstimationResult, node: int) -> str:
+    """The unit of the node's values, when the model gives one and they share it."""
+    pb = result.problem
+    ch = pb.layout.channels[node]
+    units = {pb.quantities("u" if ch.kind == "u" else "y")[k].unit for k in ch.index}
+    return units.pop() if len(units) == 1 else ""
+
+
+def plot_held_outputs(
+    result: EstimationResult, run: Any = 0, nodes: Any = None, *, ax: Any = None, window: Any = None
+) -> Drawn:
     """Each node's held values ``ybar_i`` as steps over its measured ``y_i``, transmissions marked.
 
     One panel per node. Thin line: what the node measures (``y_i``, ``ytilde_i`` with
@@ -83,7 +111,8 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     bottom mark the node's transmission instants and dots the values sent, both from
     ``result.transmissions``. With a :class:`~etobs.model.network.Network` the held
     value changes when a packet arrives, after its transmission, or not at all when it
-    is lost.
+    is lost. Legends use the outputs' names and the panels their unit when the model
+    gives them.
 
     Parameters
     ----------
@@ -95,16 +124,21 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
         eq. (5)), except with a network, where the held values are known only at the
         grid's points (each step drawn at the first point after it). The first panel's
         title says which.
-    run : int
-        Which run.
+    run : int or sequence of int
+        Which run, or several overlaid (one colour each, named in the legend).
     nodes : int or sequence of int, optional
         Output nodes ``0 .. N-1``, then the input nodes, as in ``result.transmissions``.
         Default: all.
+    ax : Axes or sequence of Axes, optional
+        One per node drawn; default a new figure.
+    window : (float, float), optional
+        Draw only ``t0 <= t <= t1``.
 
     Returns
     -------
-    fig : matplotlib.figure.Figure
-    axes : ndarray of Axes, one per node
+    Drawn
+        ``fig, axes`` (one per node); artists ``"measured"``, ``"held"``, ``"sent"`` (the
+        dots) and ``"ticks"`` (the transmission instants), per run, node and component.
 
     Examples
     --------
@@ -113,8 +147,58 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
     """
     if not isinstance(result, EstimationResult):
         raise InputTypeError(f"`result` must be an EstimationResult; got {type(result).__name__}")
-    run = _run(result.n_runs, run)
+    chosen_runs = runs(result.n_runs, run)
+    span = check_window(window)
     chosen = _nodes(result, nodes)
+    pb = result.problem
+    fig, axes, own = canvas(ax, len(chosen), 1.9 * len(chosen) + 0.8)
+    drawn: dict[str, list[Any]] = {"measured": [], "held": [], "sent": [], "ticks": []}
+    for r_k, r in enumerate(chosen_runs):
+        source = _draw_run(result, r, chosen, axes, span, drawn, r_k, len(chosen_runs))
+    overlaid = shared(axes)
+    for a, node in zip(axes, chosen, strict=True):
+        unit = _unit(result, node)
+        if overlaid:  # the nodes' values in one Axes: the unit when they share it
+            units = {_unit(result, n) for n in chosen}
+            a.set_ylabel(f"[{unit}]" if len(units) == 1 and unit else "")
+        else:
+            a.set_ylabel(_node_name(result, node) + (f"\n[{unit}]" if unit else ""))
+        # beside the panel: the steps fill it, and a legend inside would hide some
+        a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
+        a.grid(alpha=0.3)
+    axes[-1].set_xlabel("t [s]")
+    if span is not None:
+        for a in axes:
+            a.set_xlim(*span)
+    exact = source == "arc" or pb.network is None
+    if source == "arc":
+        note = "from the hybrid arc: exact steps; dots: values sent"
+    elif exact:
+        note = "steps from the transmission log (exact); measured values on the save grid; dots: values sent"
+    else:
+        note = "from the save grid: held values at its points (keep arcs for exact steps); dots: values sent"
+    if pb.network is not None:
+        note += "; held values change on delivery"
+    if own:  # on the caller's figure the title is theirs
+        axes[0].set_title(note, fontsize="small")
+        which = (
+            f"run {chosen_runs[0]}" if len(chosen_runs) == 1 else "runs " + ", ".join(map(str, chosen_runs))
+        )
+        fig.suptitle(f"Held values (steps) over measured values, {which}")
+    return Drawn(fig, axes, drawn)
+
+
+def _draw_run(
+    result: EstimationResult,
+    run: int,
+    chosen: tuple[int, ...],
+    axes: np.ndarray,
+    span: tuple[float, float] | None,
+    drawn: dict[str, list[Any]],
+    r_k: int,
+    n_runs: int,
+) -> str:
+    """Draw run ``run`` into ``axes`` (one per node of ``chosen``); returns what the rows came from."""
     t, j, q, kept = solution_rows(result.solution, run)
     if not kept:
         only = ""
@@ -124,20 +208,30 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
             f"this result kept neither arcs nor a grid of states{only}: simulate with "
             "save=SaveAt(steps=True) (exact steps) or save=SaveAt(grid=...)"
         )
+    keep = in_window(t, span)
+    t, j, q = t[keep], j[keep], q[keep]
     source = "grid" if kept == "grid" else "arc"
     measured = _measured(result, t, j, q)
     pb = result.problem
     # from the log alone, without a network: the observer holds what the node last sent
     exact = source == "arc" or pb.network is None
-    fig, axes = _figure(len(chosen), 1.9 * len(chosen) + 0.8)
     log = result.transmissions.select(run=run)
-    for ax, node in zip(axes, chosen, strict=True):
+    log = log[in_window(log.t, span)] if span is not None else log
+    several = f" (run {run})" if n_runs > 1 else ""
+    overlaid = shared(axes)  # every node in one Axes: a colour per component, ticks stacked
+    offset = 0
+    for position, (a, node) in enumerate(zip(axes, chosen, strict=True)):
         ch = pb.layout.channels[node]
         sent = log.select(rule=node)
         values = node_sent_values(result, sent, node)
         for m, (held_label, measured_label) in enumerate(_labels(result, node)):
-            color = f"C{m % 10}"
-            ax.plot(t, measured[node][:, m], color=color, lw=0.8, alpha=0.7, label=measured_label)
+            if overlaid:
+                color = f"C{(offset + m) % 10}"
+            else:
+                color = f"C{m % 10}" if n_runs == 1 else run_color(r_k, n_runs, "C0")
+            drawn["measured"] += a.plot(
+                t, measured[node][:, m], color=color, lw=0.8, alpha=0.7, label=measured_label + several
+            )
             if source == "arc":  # the arc has the held value on both sides of each jump
                 th, held, style = t, q[:, ch.held[m]], "default"
             elif exact:
@@ -145,33 +239,29 @@ def plot_held_outputs(result: EstimationResult, run: int = 0, nodes: Any = None)
                 style = "steps-post"
             else:  # with a network it changes on delivery: known only at the grid's points
                 th, held, style = t, q[:, ch.held[m]], "steps-post"
-            ax.plot(th, held, color=color, lw=1.6, drawstyle=style, label=held_label)
-            label = "values sent" if m == 0 else None
-            ax.plot(sent.t, values[:, m], ls="none", marker="o", ms=3.5, color=color, label=label)
-        ax.plot(
+            drawn["held"] += a.plot(
+                th, held, color=color, lw=1.6, drawstyle=style, label=held_label + several
+            )
+            label = "values sent" + several if m == 0 and not overlaid else None
+            drawn["sent"] += a.plot(
+                sent.t, values[:, m], ls="none", marker="o", ms=3.5, color=color, label=label
+            )
+        tick_color = "k" if n_runs == 1 else run_color(r_k, n_runs, "k")
+        if overlaid and n_runs == 1:
+            tick_color = f"C{offset % 10}"
+        offset += ch.size
+        drawn["ticks"] += a.plot(
             sent.t,
-            np.full(len(sent), 0.03),  # just above the bottom edge, clear of the axis ticks
+            # just above the bottom edge, clear of the axis ticks; one row per node when overlaid
+            np.full(len(sent), 0.03 + (0.06 * position if overlaid else 0.0)),
             ls="none",
             marker="|",
             ms=9,
             mew=1.0,
-            color="k",
-            transform=ax.get_xaxis_transform(),  # x in data, y in axes: the bottom edge
-            label=f"transmissions ({len(sent)})",
+            color=tick_color,
+            transform=a.get_xaxis_transform(),  # x in data, y in axes: the bottom edge
+            label=(f"{_node_name(result, node)}: " if overlaid else "")
+            + f"transmissions ({len(sent)})"
+            + several,
         )
-        ax.set_ylabel(_node_name(result, node))
-        # beside the panel: the steps fill it, and a legend inside would hide some
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
-        ax.grid(alpha=0.3)
-    axes[-1].set_xlabel("t [s]")
-    if source == "arc":
-        note = "from the hybrid arc: exact steps; dots: values sent"
-    elif exact:
-        note = "steps from the transmission log (exact); measured values on the save grid; dots: values sent"
-    else:
-        note = "from the save grid: held values at its points (keep arcs for exact steps); dots: values sent"
-    if pb.network is not None:
-        note += "; held values change on delivery"
-    axes[0].set_title(note, fontsize="small")
-    fig.suptitle(f"Held values (steps) over measured values, run {run}")
-    return fig, axes
+    return source

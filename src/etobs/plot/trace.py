@@ -6,23 +6,61 @@ from typing import Any
 
 import numpy as np
 
-from etobs.plot.figures import _figure
+from etobs.plot.layout import Drawn, canvas, in_window
+from etobs.plot.layout import window as check_window
 
 
-def plot_trace(trace: dict[str, np.ndarray], reference: Any = None) -> tuple[Any, np.ndarray]:
+def plot_trace(
+    trace: dict[str, np.ndarray], reference: Any = None, *, ax: Any = None, window: Any = None
+) -> Drawn:
     """Estimate ``xhat_k`` of a service trace (:func:`~etobs.runtime.server.read_trace`), one panel per state.
 
-    ``reference`` (a :class:`~etobs.runtime.replay.Replay`) adds the offline reference's
-    estimate, dashed.
+    Parameters
+    ----------
+    trace : dict
+        As :func:`~etobs.runtime.server.read_trace` returns it (``t``, ``xhat``).
+    reference : Replay, optional
+        Adds the offline reference's estimate (:class:`~etobs.runtime.replay.Replay`),
+        dashed.
+    ax : Axes or sequence of Axes, optional
+        One per state; default a new figure.
+    window : (float, float), optional
+        Draw only ``t0 <= t <= t1`` (service time).
+
+    Returns
+    -------
+    Drawn
+        ``fig, axes``; artists ``"service"`` and ``"reference"``, one line per state.
+
+    Examples
+    --------
+    >>> fig, axes = plot_trace(read_trace("trace.npz"))  # doctest: +SKIP
+
     """
+    span = check_window(window)
     n_x = trace["xhat"].shape[1]
-    fig, axes = _figure(n_x, 1.6 * n_x + 0.6)
-    for k, ax in enumerate(axes):
-        ax.plot(trace["t"], trace["xhat"][:, k], color="C1", lw=1.2, label=rf"$\hat x_{k + 1}$ (service)")
+    fig, axes, own = canvas(ax, n_x, 1.6 * n_x + 0.6)
+    drawn: dict[str, list[Any]] = {"service": [], "reference": []}
+    keep = in_window(trace["t"], span)
+    for k, a in enumerate(axes):
+        drawn["service"] += a.plot(
+            trace["t"][keep], trace["xhat"][keep, k], color="C1", lw=1.2, label=rf"$\hat x_{k + 1}$ (service)"
+        )
         if reference is not None:
-            ax.plot(reference.t, reference.xhat[:, k], color="k", lw=0.8, ls="--", label="offline reference")
-        ax.legend(loc="upper right", fontsize="small", ncol=2)
-        ax.grid(alpha=0.3)
+            ref = in_window(reference.t, span)
+            drawn["reference"] += a.plot(
+                reference.t[ref],
+                reference.xhat[ref, k],
+                color="k",
+                lw=0.8,
+                ls="--",
+                label="offline reference",
+            )
+        a.legend(loc="upper right", fontsize="small", ncol=2)
+        a.grid(alpha=0.3)
+        if span is not None:
+            a.set_xlim(*span)
     axes[-1].set_xlabel("t [s] (service time)")
-    fig.suptitle("Estimate of the observer service")
-    return fig, axes
+    if own:
+        fig.suptitle("Estimate of the observer service")
+    return Drawn(fig, axes, drawn)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from etobs.plot.figures import _figure
+from etobs.plot.layout import Drawn, canvas
 
 if TYPE_CHECKING:
     from etobs.tuning.result import TuningResult
 
 
-def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
+def plot_front(result: TuningResult, *, log: bool = True, ax: Any = None) -> Drawn:
     """Every simulated trial, the feasible front, the start design and the references.
 
     Feasible trials (certified, within the budget and every constraint) are filled;
@@ -20,10 +20,30 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     point's held-out figures are joined to it by a thin line. A simulated budget is a
     horizontal line, a certified one (it bounds the certificate's error bound, not the
     simulated error on the axis) is in the title. Lower left is better.
+
+    Parameters
+    ----------
+    result : TuningResult
+        From :func:`~etobs.tuning.tune` (``etobs tune``).
+    log : bool
+        Logarithmic axes.
+    ax : Axes, optional
+        To draw into; default a new figure.
+
+    Returns
+    -------
+    Drawn
+        ``fig, ax``; artists ``"trials"`` (one marker line per group of trials),
+        ``"front"`` (the step line and its points) and ``"references"``.
+
+    Examples
+    --------
+    >>> fig, ax = plot_front(tuning_result)  # doctest: +SKIP
+
     """
-    fig, axes = _figure(1, 4.6)
-    fig.set_figwidth(fig.get_figwidth() * 1.35)  # room for the legend on the right
+    fig, axes, own = canvas(ax, 1, 4.6, width=7.0 * 1.35)  # room for the legend on the right
     ax = axes[0]
+    drawn: dict[str, list[Any]] = {"trials": [], "front": [], "references": []}
 
     def pts(rows: list[dict[str, Any]], x: str = "transmissions_rate", y: str = "error") -> tuple[list, list]:
         # on log axes a point at 0 (a design that sent nothing) cannot be drawn: it is not counted
@@ -54,11 +74,13 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     for label, rows, marker, color in groups:
         x, y = pts(rows)
         if x:
-            ax.plot(x, y, marker=marker, ls="none", color=color, ms=5, label=f"{label} ({len(x)})", alpha=0.8)
+            drawn["trials"] += ax.plot(
+                x, y, marker=marker, ls="none", color=color, ms=5, label=f"{label} ({len(x)})", alpha=0.8
+            )
     x, y = pts(result.front)
     if x:
-        ax.step(x, y, where="post", color="C3", lw=1.2, label=f"front ({len(x)})")
-        ax.plot(x, y, "o", color="C3", ms=7)
+        drawn["front"] += ax.step(x, y, where="post", color="C3", lw=1.2, label=f"front ({len(x)})")
+        drawn["front"] += ax.plot(x, y, "o", color="C3", ms=7)
         for r in result.front:
             hx, hy = r.get("holdout_transmissions_rate"), r.get("holdout_error")
             if _shown(hx, log) and _shown(hy, log):
@@ -69,7 +91,7 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     for k, r in enumerate(result.references):
         if _shown(r.get("transmissions_rate"), log) and _shown(r.get("error"), log):
             star = r["name"] == "start"
-            ax.plot(
+            drawn["references"] += ax.plot(
                 r["transmissions_rate"],
                 r["error"],
                 "*" if star else "D",
@@ -93,11 +115,15 @@ def plot_front(result: TuningResult, *, log: bool = True) -> tuple[Any, Any]:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     budget = f"; certified bound <= {result.budget:.4g}" if result.budget_kind == "certified" else ""
-    fig.suptitle(
+    title = (
         f"Tuning {result.summary.get('name', '')}: {len(result.trials)} trials, "
         f"{len(result.front)} on the front{budget}"
     )
-    return fig, ax
+    if own:
+        fig.suptitle(title)
+    elif budget:  # the certified budget is not on the axes: the caller's figure needs it too
+        ax.set_title(budget.lstrip("; "), fontsize="small")
+    return Drawn(fig, ax, drawn)
 
 
 def _finite(x: Any) -> bool:
