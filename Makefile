@@ -18,8 +18,8 @@ demo: $(VENV)/.installed-plot
 
 ## lint: ruff (lint and format) and mypy (strict where pyproject.toml says)
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests benchmarks examples
-	$(BIN)/ruff format --check src tests benchmarks examples
+	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py
+	$(BIN)/ruff format --check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py
 	$(BIN)/mypy
 
 ## test: lint, the whole test suite (slow tests included, one process per core, each test
@@ -71,4 +71,4 @@ docs: $(VENV)/.installed-docs
 	$(BIN)/sphinx-build -W --keep-going -c docs -b html . docs/_build/html
 
 clean:
-	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis docs/_build docs/api.rst docs/generated
+	rm -rf $(VENV) robot-arm-out .pytest_cache .ruff_cache .mypy_cache .hypothesis docs/_build docs/api.rst docs/generated docs/gallery docs/_gallery_src

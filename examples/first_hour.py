@@ -1,4 +1,6 @@
-"""A researcher's first hour: a Van der Pol oscillator, from model to table to plot."""
+"""A researcher's first hour
+=========================
+A Van der Pol oscillator, from model to table to plot: written once, for one run."""
 
 import numpy as np
 
@@ -7,7 +9,7 @@ from etobs.plot import plot_held_outputs
 
 
 def vdp(t, x, u, v, p):
-    """Van der Pol, x'' = mu (1 - x^2) x' - x + v: written once, for one run."""
+    """Van der Pol, x'' = mu (1 - x^2) x' - x + v."""
     return np.array([x[1], p[0] * (1.0 - x[0] ** 2) * x[1] - x[0] + v[0]])
 
 
@@ -19,11 +21,9 @@ problem = EstimationProblem(plant, observer, nodes=[Node([0], rule), Node([1], r
 x0 = np.random.default_rng(1).uniform(-2.0, 2.0, size=(8, 2))  # eight runs at once
 result = simulate(problem, x0, 20.0, save=SaveAt(steps=True, grid=np.linspace(0.0, 20.0, 401)))
 print(result)  # a few lines: status, transmissions per node, backend
-
 summary = result.to_pandas("summary")  # one row per run
 print(summary[["status", "transmissions_node0", "transmissions_node1", "max_error"]])
 sent = result.to_pandas("transmissions")  # one row per transmission, with the value sent
 print(sent.groupby(["run", "node"])["t"].diff().groupby(sent["node"]).min())  # shortest gap per node
-
 fig, axes = plot_held_outputs(result, run=0)  # ybar_i as steps over y_i, transmissions marked
 fig.savefig("first_hour.png", dpi=100)

@@ -62,6 +62,16 @@ def test_the_api_reference_lists_every_public_name_and_no_other(site: Path) -> N
     }
     assert documented == set(etobs.__all__), sorted(documented ^ set(etobs.__all__))
     assert {"simulate", "Sampled", "DynamicRule", "EstimationResult"} <= documented
+    plots = {
+        name.removeprefix("etobs.plot.")
+        for role, entries in inv.items()
+        if role.startswith("py:")
+        for name in entries
+        if re.fullmatch(r"etobs\.plot\.\w+", name)
+    }
+    from etobs import plot
+
+    assert plots == set(plot.__all__), sorted(plots ^ set(plot.__all__))
 
 
 def test_the_front_page_is_the_readme_and_every_page_is_built(site: Path) -> None:
@@ -76,7 +86,15 @@ def test_the_front_page_is_the_readme_and_every_page_is_built(site: Path) -> Non
         assert href in front, href
 
 
-@pytest.mark.parametrize("name", sorted(etobs.__all__))
+def _plot_names() -> list[str]:
+    try:
+        import etobs.plot
+    except ImportError:  # pragma: no cover - the plot extra is in the test extra
+        return []
+    return [f"plot.{n}" for n in sorted(etobs.plot.__all__)]
+
+
+@pytest.mark.parametrize("name", sorted(etobs.__all__) + _plot_names())
 def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name: str) -> None:
     """Examples everywhere (the doctests of ``src`` run them); Parameters and Returns where they apply.
 
@@ -86,7 +104,11 @@ def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name: str) -
     """
     from numpydoc.docscrape import NumpyDocString
 
-    obj = getattr(etobs, name)
+    import etobs.plot
+
+    obj = getattr(etobs.plot, name[5:]) if name.startswith("plot.") else getattr(etobs, name)
+    if name in ("plot.COLUMN_WIDTH", "plot.PAPER_RC"):  # settings: documented where they are defined
+        return
     if not callable(obj):
         assert name == "__version__" and re.fullmatch(r"\d+\.\d+\.\d+.*", obj)
         return
@@ -96,5 +118,36 @@ def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name: str) -
     if inspect.isclass(obj):
         exempt = issubclass(obj, BaseException | enum.Enum) or not inspect.signature(obj).parameters
         assert exempt or doc["Parameters"] or doc["Attributes"], f"{name}: no Parameters section"
+    elif not inspect.signature(obj).parameters:  # paper_style(): nothing to take, what it yields
+        assert doc["Returns"] or doc["Yields"], f"{name}: no Returns or Yields section"
     else:
         assert doc["Parameters"] and doc["Returns"], f"{name}: Parameters {bool(doc['Parameters'])}, Returns"
+
+
+def test_the_gallery_runs_every_example_with_its_figures_and_the_two_panel_pdf(site: Path) -> None:
+    examples = sorted(p.stem for p in (ROOT / "examples").glob("*.py"))
+    assert {"robot_arm", "first_hour"} <= set(examples)
+    index = (site / "docs" / "gallery" / "index.html").read_text()
+    for name in examples:
+        page = (site / "docs" / "gallery" / f"{name}.html").read_text()
+        assert f"{name}.html" in index
+        shown = re.findall(rf'src="([./]*_images/sphx_glr_{name}_\d+\.png)"', page)
+        assert shown, f"{name}: no figure"  # drawn when the site was built
+        for src in shown:
+            assert (site / "docs" / "gallery" / src).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the robot arm's two-panel figure, written as PDF, offered for download
+    page = (site / "docs" / "gallery" / "robot_arm.html").read_text()
+    (href,) = set(re.findall(r'href="([^"]*robot-arm\.pdf)"', page))
+    pdf = (site / "docs" / "gallery" / href).read_bytes()
+    assert pdf.startswith(b"%PDF") and b"/Subtype /Image" not in pdf
+    assert b"motor angle" in pdf or b"/FontFile2" in pdf
+
+
+def test_every_cross_reference_is_checked() -> None:
+    """nitpicky: the -W build fails on a reference that resolves to nothing (docs/conf.py)."""
+    conf: dict = {"__file__": str(ROOT / "docs" / "conf.py")}
+    exec(compile((ROOT / "docs" / "conf.py").read_text(), "conf.py", "exec"), conf)
+    assert conf["nitpicky"] is True
+    # only other projects' objects are exempt (their inventories would need the network)
+    for _, pattern in conf["nitpick_ignore_regex"]:
+        assert not re.fullmatch(pattern, "etobs.simulate"), pattern

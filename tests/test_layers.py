@@ -263,17 +263,17 @@ def test_importing_the_numerics_loads_no_plotting_cli_or_matplotlib():
 
 
 def _readme_layers() -> str:
-    """The README's "Layers" list item (Development section), its lines joined."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The "Layers" list item of docs/development.md (the README's front page links it), its lines joined."""
+    text = (ROOT / "docs" / "development.md").read_text(encoding="utf-8")
     found = re.search(r"^- Layers\b.*?(?=^\s*$|^- )", text, flags=re.MULTILINE | re.DOTALL)
-    assert found, 'README.md has no "- Layers" line'
+    assert found, 'docs/development.md has no "- Layers" line'
     return " ".join(found.group(0).split())
 
 
 def test_the_readme_layer_line_names_every_unit_in_the_table_order():
     named = [w for w in re.findall(r"`([^`]+)`", _readme_layers()) if w in _rank()]
     assert named == [u for layer in LAYERS for u in layer], (
-        f"README.md's Layers line names {named}; LAYERS (tests/test_layers.py) has "
+        f"docs/development.md's Layers line names {named}; LAYERS (tests/test_layers.py) has "
         f"{[list(layer) for layer in LAYERS]}"
     )
 

@@ -473,7 +473,7 @@ def norm(values: Any) -> float:
     """``|v|``: the square root of the sum of squares, added in order from ``0.0``.
 
     A sampled node's norm (the sensor node's, the simulator's and the generated C's: the
-    engine's model sums the same way). Not :func:`sum`, which compensates its rounding
+    engine's model sums the same way). Not ``sum``, which compensates its rounding
     from Python 3.12 on.
     """
     acc = 0.0

@@ -83,6 +83,7 @@ def test_a_two_panel_figure_composed_from_two_calls_written_as_pdf_and_svg(named
     ]
     assert [float(t.get_ydata()[0]) for t in ticks if len(t.get_ydata())] == [0.03, 0.09]
     assert fig.texts == [] and not fig._suptitle  # the caller's figure: no title of ours
+    assert top.get_xlabel() == "" and bottom.get_xlabel() == "t [s]"  # the shared time axis, once
     pdf = save_figure(fig, tmp_path / "two-panel.pdf")
     data = pdf.read_bytes()
     assert data.startswith(b"%PDF") and b"/Subtype /Image" not in data  # vector, no raster
@@ -95,6 +96,14 @@ def test_a_two_panel_figure_composed_from_two_calls_written_as_pdf_and_svg(named
     svg = save_figure(fig, tmp_path / "two-panel.svg").read_text()
     assert "<svg" in svg and "position [m]" in svg  # text kept as text
     assert save_figure(fig, tmp_path / "two-panel.png", dpi=50).read_bytes().startswith(b"\x89PNG")
+
+
+def test_components_choose_the_states_drawn(named):
+    drawn = plot_states(named, components=[1])
+    assert len(drawn.axes) == 1 and drawn.axes[0].get_ylabel() == "velocity [m/s]"
+    np.testing.assert_array_equal(drawn.artists["x"][0].get_ydata(), named.on_grid().x[0, :, 1])
+    with pytest.raises(InputError, match=r"`components` must be in 0\.\.1; got 2"):
+        plot_states(named, components=[0, 2])
 
 
 def test_a_time_window_draws_only_its_points(named):

@@ -70,7 +70,7 @@ def simulate(
         ``0 .. B-1``). A sweep passes the runs' global indices, so that a run's packets do
         not depend on how the sweep was chunked.
     progress : bool or None
-        A progress bar on stderr by simulated time (:func:`etobs._progress.horizon_bar`:
+        A progress bar on stderr by simulated time (``etobs._progress.horizon_bar``:
         the runs' mean time reached and the wall time left, so a single long run shows
         too): ``None`` (default) shows it when stderr is a terminal and the solve takes
         more than a second; ``True`` or ``False`` force it on or off. On the engine the

@@ -113,7 +113,7 @@ class EntryResult:
 
 @dataclass(frozen=True)
 class Comparison:
-    """Result of :func:`compare`: one :class:`EntryResult` per (rule, network).
+    """Result of :func:`~etobs.experiments.compare.compare`: one ``EntryResult`` per (rule, network).
 
     Attributes
     ----------

@@ -48,9 +48,10 @@ class SolverOptions:
     max_steps : int
         Step limit per run (accepted and rejected steps on the engine; accepted steps
         on the scipy reference, which counts them inside every flow segment); a run
-        reaching it stops with status ``max_steps``. The default (:data:`MAX_STEPS`) ends
-        a runaway run (``t_end=1e300``, ``max_step=1e-12``) of the robot arm in about 20 s
-        on the engine, and is 180 times the steps of the longest run of Table 1.
+        reaching it stops with status ``max_steps``. The default
+        (``etobs.hybrid.options.MAX_STEPS``, 2,000,000) ends a runaway run
+        (``t_end=1e300``, ``max_step=1e-12``) of the robot arm in about 20 s on the
+        engine, and is 180 times the steps of the longest run of Table 1.
     zeno_jumps : int or None
         The Zeno rule (:mod:`etobs.hybrid.zeno`): a run whose jumps number more than
         ``zeno_jumps`` within a time window of ``zeno_span * max(1, |t|)`` stops with

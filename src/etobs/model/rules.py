@@ -130,7 +130,7 @@ class TriggerRule(ABC):
 
 
 def engine_form_of(rule: TriggerRule) -> EngineForm | None:
-    """``rule.engine_form()`` for a kind of etobs or one sampled, else ``None`` (:func:`registered`)."""
+    """``rule.engine_form()`` for a kind of etobs or one sampled, else ``None`` (``registered``)."""
     sampled = type(rule).__dict__.get("samples_kind_rule") is True  # etobs.model.sampled.Sampled itself
     return rule.engine_form() if registered(rule) or sampled else None
 

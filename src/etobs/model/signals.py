@@ -21,7 +21,7 @@ ZERO, CONSTANT, SINUSOID, FUNCTION = 0, 1, 2, 3
 
 
 class Signal(ABC):
-    """A vector signal of dimension :attr:`dim`."""
+    """A vector signal of dimension ``dim``."""
 
     dim: int
 

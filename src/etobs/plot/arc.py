@@ -22,7 +22,8 @@ from etobs.errors import InputError, InputTypeError
 from etobs.estimation.result import EstimationResult
 from etobs.hybrid.solution import HybridArc, HybridSolution
 from etobs.plot.figures import _node_name, _run
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label
+from etobs.plot.layout import components as entries
 from etobs.plot.layout import window as check_window
 
 #: What ``plot_hybrid_arc`` can draw from an :class:`EstimationResult`, with its label.
@@ -84,16 +85,6 @@ def solution_rows(sol: HybridSolution, run: int) -> tuple[np.ndarray, np.ndarray
     return t[order], j[order], q[order], "+".join(kept)
 
 
-def _components(name: str, value: Any, dim: int) -> tuple[int, ...]:
-    if value is None:
-        return tuple(range(dim))
-    comps = v.index_tuple(name, value, what="component")
-    for k in comps:
-        if k >= dim:
-            raise InputError(f"`{name}` must be in 0..{dim - 1}; got {k}")
-    return comps
-
-
 def _estimation_rows(result: EstimationResult, run: int, what: str, components: Any) -> _Rows:
     if what not in _VARIABLES:
         raise InputError(f"`what` must be one of {sorted(_VARIABLES)}; got {what!r}")
@@ -115,7 +106,7 @@ def _estimation_rows(result: EstimationResult, run: int, what: str, components: 
                 raise InputError("`what='eta'`: no node's rule has a state eta (static or periodic rules)")
             comps = tuple(stateful)
         else:
-            comps = _components("components", components, values.shape[1])
+            comps = entries("components", components, values.shape[1])
             for i in comps:
                 if i not in stateful:
                     raise InputError(
@@ -123,7 +114,7 @@ def _estimation_rows(result: EstimationResult, run: int, what: str, components: 
                     )
         labels = tuple(rf"$\eta$ ({_node_name(result, i)})" for i in comps)
     else:
-        comps = _components("components", components, values.shape[1])
+        comps = entries("components", components, values.shape[1])
         labels = tuple(_label(result, what, k) for k in comps)
     return _Rows(tr.t, tr.j, values[:, comps], labels, refined)
 
@@ -151,7 +142,7 @@ def _hybrid_rows(result: HybridSolution | HybridArc, run: int, what: str, compon
         if result.arcs is None:
             raise InputError("this solution kept no arcs: solve with save=SaveAt(steps=True)")
         t, j, x, kept = solution_rows(result, run)
-    comps = _components("components", components, x.shape[1])
+    comps = entries("components", components, x.shape[1])
     return _Rows(t, j, x[:, comps], tuple(f"$x_{{{k + 1}}}$" for k in comps), kept == "arc+grid")
 
 
@@ -296,7 +287,7 @@ def plot_hybrid_arc(
     top.grid(alpha=0.3, which="both")
     ax_j.autoscale_view()
     ax_j.set_ylabel("j")
-    ax_j.set_xlabel("t [s]")
+    time_label(ax_j)
     ax_j.yaxis.get_major_locator().set_params(integer=True)
     ax_j.grid(alpha=0.3)
     if span is not None:

@@ -17,7 +17,8 @@ from etobs._validate import flag
 from etobs.errors import InputTypeError
 from etobs.estimation.metrics import inter_event_times
 from etobs.estimation.result import EstimationResult, Trajectory
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, window
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label, window
+from etobs.plot.layout import components as entries
 
 
 def _check(result: Any) -> EstimationResult:
@@ -55,13 +56,15 @@ def _trajectory(result: EstimationResult, run: int, span: tuple[float, float] | 
 
 
 def _time_axis(axes: np.ndarray, span: tuple[float, float] | None) -> None:
-    axes[-1].set_xlabel("t [s]")
+    time_label(axes[-1])
     if span is not None:
         for ax in axes:
             ax.set_xlim(*span)
 
 
-def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, window: Any = None) -> Drawn:
+def plot_states(
+    result: EstimationResult, run: Any = 0, *, components: Any = None, ax: Any = None, window: Any = None
+) -> Drawn:
     """Plant states ``x_k`` and estimates ``xhat_k`` against time, one panel per state.
 
     Parameters
@@ -70,8 +73,12 @@ def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, windo
         With a save grid (drawn from it) or the arcs.
     run : int or sequence of int
         The run, or several overlaid (one colour each, named in the legend).
+    components : int or sequence of int, optional
+        The states to draw (indices from 0); default all.
     ax : Axes or sequence of Axes, optional
-        One per state, to draw into (a figure of the caller's); default a new figure.
+        One per state drawn, to draw into (a figure of the caller's), or one Axes for
+        all of them (overlaid, a colour per state, the legend beside it); default a new
+        figure.
     window : (float, float), optional
         Draw only ``t0 <= t <= t1``.
 
@@ -88,7 +95,9 @@ def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, windo
     """
     result = _check(result)
     chosen, span = runs(result.n_runs, run), window_(window)
-    quantities = result.problem.quantities("x")
+    every = result.problem.quantities("x")
+    chosen_k = entries("components", components, len(every))
+    quantities = tuple(every[k] for k in chosen_k)
     n_x = len(quantities)
     fig, axes, own = canvas(ax, n_x, 1.6 * n_x + 0.6)
     overlaid = shared(axes)  # one Axes for every state: a colour per state, units in the legend
@@ -96,9 +105,9 @@ def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, windo
     for r_k, r in enumerate(chosen):
         tr = _trajectory(result, r, span)
         several = f" (run {r})" if len(chosen) > 1 else ""
-        for k, (a, q) in enumerate(zip(axes, quantities, strict=True)):
+        for p, (a, q, k) in enumerate(zip(axes, quantities, chosen_k, strict=True)):
             if overlaid:
-                color = hat_color = f"C{k % 10}"
+                color = hat_color = f"C{p % 10}"
             else:
                 color = run_color(r_k, len(chosen), "C0")
                 hat_color = color if len(chosen) > 1 else "C1"
@@ -112,9 +121,11 @@ def plot_states(result: EstimationResult, run: Any = 0, *, ax: Any = None, windo
         if overlaid:
             units = {q.unit for q in quantities}
             a.set_ylabel(f"x [{units.pop()}]" if len(units) == 1 and "" not in units else "x")
+            # beside the panel: several states fill it, and a legend inside would hide some
+            a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
         else:
             a.set_ylabel(q.axis_label if q.name else (f"[{q.unit}]" if q.unit else ""))
-        a.legend(loc="upper right", fontsize="small", ncol=2)
+            a.legend(loc="upper right", fontsize="small", ncol=2)
         a.grid(alpha=0.3)
     _time_axis(axes, span)
     if own:

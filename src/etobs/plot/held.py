@@ -13,7 +13,7 @@ from etobs.estimation.tables import node_sent_values
 from etobs.model.signals import Zero
 from etobs.plot.arc import solution_rows
 from etobs.plot.figures import _node_name
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label
 from etobs.plot.layout import window as check_window
 
 
@@ -166,7 +166,7 @@ def plot_held_outputs(
         # beside the panel: the steps fill it, and a legend inside would hide some
         a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
         a.grid(alpha=0.3)
-    axes[-1].set_xlabel("t [s]")
+    time_label(axes[-1])
     if span is not None:
         for a in axes:
             a.set_xlim(*span)

@@ -10,6 +10,7 @@ sets fonts and lines for it, and :func:`save_figure` writes PDF, SVG or PNG.
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -122,6 +123,24 @@ def canvas(
 def shared(axes: np.ndarray) -> bool:
     """Whether the panels share one Axes (``ax=`` one Axes for several panels)."""
     return len(axes) > 1 and all(a is axes[0] for a in axes)
+
+
+def components(name: str, value: Any, size: int) -> tuple[int, ...]:
+    """``value`` checked as indices into a vector of ``size`` entries; all of them when ``None``."""
+    if value is None:
+        return tuple(range(size))
+    chosen = v.index_tuple(name, value, what="component")
+    for k in chosen:
+        if k >= size:
+            raise InputError(f"`{name}` must be in 0..{size - 1}; got {k}")
+    return chosen
+
+
+def time_label(ax: Any, label: str = "t [s]") -> None:
+    """Label ``ax``'s time axis, unless a panel below shares it (a grid's inner rows stay bare)."""
+    spec = ax.get_subplotspec()
+    if spec is None or spec.is_last_row() or not ax.get_shared_x_axes().get_siblings(ax)[1:]:
+        ax.set_xlabel(label)
 
 
 def window(value: Any) -> tuple[float, float] | None:
@@ -287,6 +306,12 @@ def save_figure(fig: Any, path: str | os.PathLike[str], *, dpi: float = 300.0) -
     dpi = v.real("dpi", dpi, lower=1.0)
     metadata = {"pdf": {"CreationDate": None}, "svg": {"Date": None}, "eps": {"CreationDate": None}}.get(fmt)
     rc = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none", "svg.hashsalt": "etobs"}
-    with _matplotlib().rc_context(rc):
-        fig.savefig(target, format=fmt, dpi=dpi, metadata=metadata)
+    subset = logging.getLogger("fontTools")  # embedding a font logs every table at INFO
+    level = subset.level
+    subset.setLevel(max(level, logging.WARNING))
+    try:
+        with _matplotlib().rc_context(rc):
+            fig.savefig(target, format=fmt, dpi=dpi, metadata=metadata)
+    finally:
+        subset.setLevel(level)
     return target

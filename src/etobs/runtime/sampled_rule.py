@@ -90,7 +90,7 @@ def k_function(spec: Any, key: str, constant: bool = False) -> KFn:
 
 
 class SampledRule:
-    """A node's rule at sampling period ``period``: :meth:`decide` once per sample.
+    """A node's rule at sampling period ``period``: ``decide`` once per sample.
 
     Parameters
     ----------
