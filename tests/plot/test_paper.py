@@ -170,8 +170,8 @@ def test_paper_style_sets_a_journals_fonts_while_drawing(named):
         (lambda r, f: plot_error(r, run=[0, 0]), InputError, r"`run` must not repeat an index; got \[0, 0\]"),
         (lambda r, f: plot_error(r, run=[]), InputError, r"`run` must name at least one run index"),
         (lambda r, f: paper_figure(columns=3), InputError, r"`columns` must be 1 or 2 \(one column or the page\)"),
-        (lambda r, f: save_figure(f, "figure.jpg"), InputError, r"`path` must end in one of \.pdf, \.svg, \.eps, "
-         r"\.png; got 'figure\.jpg'"),
+        (lambda r, f: save_figure(f, "figure.eps"), InputError, r"`path` must end in one of \.pdf, \.svg, \.png; "
+         r"got 'figure\.eps'"),
     ],
 )  # fmt: skip
 def test_bad_arguments_are_named(named, call, error, match):
@@ -193,3 +193,49 @@ def test_bad_arguments_are_named(named, call, error, match):
 def test_names_and_units_are_checked(kwargs, error, match):
     with pytest.raises(error, match=match):
         Plant(f_p=_plant, h=_h, n_x=2, n_y=2, n_v=2, **kwargs)
+
+
+def test_overlaid_runs_and_entries_get_a_colour_each(named):
+    from matplotlib.figure import Figure
+
+    ax = Figure().subplots()
+    states = plot_states(named, run=[0, 1], ax=ax)
+    colours = [ln.get_color() for ln in states.artists["x"]]
+    assert len(set(colours)) == 4  # (run 0, position), (run 0, velocity), (run 1, ...)
+    assert [ln.get_color() for ln in states.artists["xhat"]] == colours  # each estimate as its state
+    held = plot_held_outputs(named, run=[0, 1], ax=Figure().subplots())
+    assert len({ln.get_color() for ln in held.artists["held"]}) == 4
+    rows = {float(t.get_ydata()[0]) for t in held.artists["ticks"] if len(t.get_ydata())}
+    assert len(rows) == 4  # the ticks of each (run, node) on a row of their own
+    gaps = plot_inter_event_times(named, run=[0, 1], ax=Figure().subplots())
+    assert len({(ln.get_color(), ln.get_marker()) for ln in gaps.artists["gaps"]}) == 4
+    arc = plot_hybrid_arc(named, run=[0, 1], what="x")
+    assert len({ln.get_color() for ln in arc.artists["flows"]}) == 4
+
+
+def test_a_window_between_saved_points_draws_to_its_edges_and_one_past_them_does_not_fail(
+    arcs_only, grid_only
+):
+    drawn = plot_states(arcs_only, window=(0.5, 1.5))
+    t = np.asarray(drawn.artists["x"][0].get_xdata())
+    arc_t = arcs_only.arc(0).t
+    assert t[0] < 0.5 < t[1] and t[-2] < 1.5 < t[-1]  # one saved point beyond each edge
+    assert t[0] == arc_t[arc_t < 0.5].max() and t[-1] == arc_t[arc_t > 1.5].min()
+    assert drawn.axes[0].get_xlim() == (0.5, 1.5)
+    between = np.linspace(0, T_END, 101)  # grid_only's points: 0.05 apart
+    empty = plot_held_outputs(grid_only, window=(between[10] + 0.01, between[10] + 0.02))
+    assert all(len(ln.get_xdata()) == 2 for ln in empty.artists["held"])  # the points either side
+    beyond = plot_held_outputs(grid_only, window=(T_END + 1.0, T_END + 2.0))
+    # no crash (it raised IndexError): the last saved point only, the xlim shows the empty window
+    assert [list(ln.get_xdata()) for ln in beyond.artists["held"]] == [[T_END, T_END]] * 2
+    assert beyond.axes[0].get_xlim() == (T_END + 1.0, T_END + 2.0)
+
+
+def test_drawn_pickles_and_copies_with_its_artists(named):
+    import copy
+    import pickle
+
+    drawn = plot_error(named)
+    for other in (pickle.loads(pickle.dumps(drawn)), copy.copy(drawn), copy.deepcopy(drawn)):
+        assert isinstance(other, Drawn) and set(other.artists) == {"error"}
+        np.testing.assert_array_equal(other.artists["error"][0].get_ydata(), named.on_grid().error[0])

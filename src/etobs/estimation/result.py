@@ -255,13 +255,16 @@ class EstimationResult:
             ``hold="innovation"`` what was sent, ``ytilde_k - yhat_k``, Remark 3) and
             ``sent_u<k>`` for input ``k`` of an input node (``u_k(t)``); NaN in the
             columns of other nodes' components. The row count per run and node equals
-            :func:`~etobs.estimation.transmission_counts`.
+            :func:`~etobs.estimation.transmission_counts`. ``attrs["quantities"]`` names
+            each value column with the model's name and unit (``"motor angle [rad]"``).
 
             ``"grid"``: the saved grid in long form, one row per run, grid point,
             variable and component: columns ``run``, ``t``, ``j``, ``variable``
             (categorical: ``x``, ``z``, ``xhat``, ``ybar``, ``e``, ``eta``, ``error``),
             ``component`` (index into the variable; for ``eta`` the node; 0 for
-            ``error = |x - xhat|``), ``value``. Long rather than one column per
+            ``error = |x - xhat|``), ``value``, ``name`` and ``unit`` (categorical: the
+            model's name and unit of the component, else its symbol ``x_1`` and ``""``;
+            the node's name for ``eta``). Long rather than one column per
             component: the variables have different sizes, and a long frame filters,
             groups and plots (``seaborn``, ``df.pivot``) without knowing them. Points
             after a run stopped hold NaN with ``j = -1``. :meth:`to_xarray` holds the
@@ -304,10 +307,13 @@ class EstimationResult:
         observer_state``), ``ybar``, ``e`` (``run, time, output``), ``eta`` (``run, time,
         node``: output nodes, then input nodes; node 0 is the paper's sensor 1),
         ``error = |x - xhat|`` and ``j`` (``run, time``). Coordinates: ``run``, ``time``
-        (the save grid), the component indices, ``node_name`` and ``node_kind`` on
+        (the save grid), the component indices, the model's names and units
+        (``state_name``, ``state_unit`` on ``state``; ``observer_state_name``,
+        ``observer_state_unit``; ``output_name``, ``output_unit``: symbols such as ``x_1``
+        and ``""`` where the model gives none), ``node_name`` and ``node_kind`` on
         ``node``, ``status`` and ``message`` on ``run``. Attributes: ``backend``,
-        ``backend_reason``, ``t_span``, ``hold``; etobs attaches no units. Points after a
-        run stopped hold NaN with ``j = -1``.
+        ``backend_reason``, ``t_span``, ``hold``. Points after a run stopped hold NaN
+        with ``j = -1``.
 
         Raises
         ------

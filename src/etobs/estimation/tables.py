@@ -198,8 +198,7 @@ def sent_quantities(result: EstimationResult) -> dict[str, str]:
     out = {}
     for column in sent_column_names(result):
         kind, k = column[5], int(column[6:])
-        q = result.problem.quantities(kind)[k]
-        out[column] = f"{q.text} [{q.unit}]" if q.unit else q.text
+        out[column] = result.problem.quantities(kind)[k].described
     return out
 
 
@@ -261,12 +260,13 @@ def grid(
         )
     data = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
     data["variable"] = pd.Categorical.from_codes(data["variable"], categories=list(VARIABLES))
-    # each row's quantity by name and unit (the model's, else the symbol x_1 and no unit)
-    names = {n: _component_text(result, n) for n in variables}
-    data["name"] = np.concatenate([np.tile([t for t, _ in names[p]], B * G) for p in variables])
-    data["unit"] = np.concatenate([np.tile([u for _, u in names[p]], B * G) for p in variables])
-    data["name"] = pd.Categorical(data["name"], categories=list(dict.fromkeys(data["name"])))
-    data["unit"] = pd.Categorical(data["unit"], categories=list(dict.fromkeys(data["unit"])))
+    # each row's quantity by name and unit (the model's, else the symbol x_1 and no unit), as
+    # categorical codes tiled like the components (the strings once each, not once per row)
+    texts = {n: _component_text(result, n) for n in variables}
+    for col, pick in (("name", 0), ("unit", 1)):
+        categories = list(dict.fromkeys(pair[pick] for n in variables for pair in texts[n]))
+        codes = [np.tile([categories.index(pair[pick]) for pair in texts[n]], B * G) for n in variables]
+        data[col] = pd.Categorical.from_codes(np.concatenate(codes).astype(np.int32), categories=categories)
     df = pd.DataFrame(data)
     df.attrs.update(window=(lo, hi), variables=dict(VARIABLES), node_names=_node_frame(result)[0])
     return df

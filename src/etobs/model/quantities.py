@@ -53,12 +53,22 @@ class Quantity:
     @property
     def axis_label(self) -> str:
         """``label [unit]``, or the label alone without a unit."""
-        return f"{self.label} [{self.unit}]" if self.unit else self.label
+        return with_unit(self.label, self.unit)
 
     @property
     def text(self) -> str:
         """Plain text for tables: the name, else the symbol (``x_1``)."""
         return self.name or self.symbol
+
+    @property
+    def described(self) -> str:
+        """Plain text with the unit: ``motor angle [rad]``; ``x_1`` without name or unit."""
+        return with_unit(self.text, self.unit)
+
+
+def with_unit(text: str, unit: str) -> str:
+    """``text [unit]``, or ``text`` alone without a unit: how etobs writes a quantity and its unit."""
+    return f"{text} [{unit}]" if unit else text
 
 
 def names(name: str, value: Any, size: int) -> tuple[str, ...] | None:

@@ -21,8 +21,9 @@ from etobs import _validate as v
 from etobs.errors import InputError, InputTypeError
 from etobs.estimation.result import EstimationResult
 from etobs.hybrid.solution import HybridArc, HybridSolution
+from etobs.model.quantities import with_unit
 from etobs.plot.figures import _node_name, _run
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_axes
 from etobs.plot.layout import components as entries
 from etobs.plot.layout import window as check_window
 
@@ -125,7 +126,7 @@ def _label(result: EstimationResult, what: str, k: int) -> str:
     if not q.name:
         return f"${_VARIABLES[what]}_{{{k + 1}}}$"
     suffix = {"x": "", "xhat": " estimate", "z": "", "ybar": ", held", "e": ", error e"}[what]
-    return q.name + suffix + (f" [{q.unit}]" if q.unit else "")
+    return with_unit(q.name + suffix, q.unit)
 
 
 def _hybrid_rows(result: HybridSolution | HybridArc, run: int, what: str, components: Any) -> _Rows:
@@ -245,7 +246,13 @@ def plot_hybrid_arc(
         name = what or "error"
         rows = [_estimation_rows(result, r, name, components) for r in chosen]
     elif isinstance(result, HybridSolution | HybridArc):
-        chosen = (run,) if isinstance(result, HybridArc) else runs(result.n_runs, run)
+        if isinstance(result, HybridArc):
+            try:
+                chosen = runs(1, run)
+            except InputError:
+                raise InputError(f"`run` must be 0 for a HybridArc (one run); got {v.shown(run)}") from None
+        else:
+            chosen = runs(result.n_runs, run)
         rows = [_hybrid_rows(result, r, what or "x", components) for r in chosen]
         name = "x"
     else:
@@ -267,8 +274,8 @@ def plot_hybrid_arc(
         several = f" (run {r})" if len(chosen) > 1 else ""
         for k, label in enumerate(rs.labels):
             # one variable: HyEQ's colours (blue flows, red jumps); several: one colour each
-            if len(chosen) > 1:
-                flow = jump = run_color(r_k, len(chosen), "C0")
+            if len(chosen) > 1:  # a colour per (run, entry)
+                flow = jump = f"C{(r_k * len(rs.labels) + k) % 10}"
             else:
                 flow = "C0" if single else f"C{k % 10}"
                 jump = "C3" if single else flow
@@ -287,12 +294,9 @@ def plot_hybrid_arc(
     top.grid(alpha=0.3, which="both")
     ax_j.autoscale_view()
     ax_j.set_ylabel("j")
-    time_label(ax_j)
+    time_axes(axes, span)
     ax_j.yaxis.get_major_locator().set_params(integer=True)
     ax_j.grid(alpha=0.3)
-    if span is not None:
-        for a in axes:
-            a.set_xlim(*span)
     if own:
         note = ", flows refined with the save grid" if rows[0].refined else ""
         which = f"run {chosen[0]}" if len(chosen) == 1 else "runs " + ", ".join(map(str, chosen))
@@ -304,5 +308,5 @@ def _in(rows: _Rows, span: tuple[float, float] | None) -> _Rows:
     """The rows with ``t`` in ``span``."""
     if span is None:
         return rows
-    keep = in_window(rows.t, span)
+    keep = in_window(rows.t, span, reach=True)  # hybrid order is time order: the flows reach the edges
     return _Rows(rows.t[keep], rows.j[keep], rows.values[keep], rows.labels, rows.refined)

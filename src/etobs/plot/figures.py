@@ -17,11 +17,13 @@ from etobs._validate import flag
 from etobs.errors import InputTypeError
 from etobs.estimation.metrics import inter_event_times
 from etobs.estimation.result import EstimationResult, Trajectory
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label, window
+from etobs.model.quantities import with_unit
+from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_axes, window
 from etobs.plot.layout import components as entries
 
 
-def _check(result: Any) -> EstimationResult:
+def check_result(result: Any) -> EstimationResult:
+    """``result`` checked to be an :class:`~etobs.estimation.EstimationResult`."""
     if not isinstance(result, EstimationResult):
         raise InputTypeError(f"`result` must be an EstimationResult; got {type(result).__name__}")
     return result
@@ -51,15 +53,8 @@ def _trajectory(result: EstimationResult, run: int, span: tuple[float, float] | 
     else:
         tr = result.arc(run)
         keep = np.ones(tr.t.shape, dtype=bool)
-    keep &= in_window(tr.t, span)
+    keep &= in_window(tr.t, span, reach=True)  # a point beyond each end: the lines reach the edges
     return Trajectory(**{k: getattr(tr, k)[keep] for k in ("t", "j", "x", "z", "xhat", "ybar", "e", "eta")})
-
-
-def _time_axis(axes: np.ndarray, span: tuple[float, float] | None) -> None:
-    time_label(axes[-1])
-    if span is not None:
-        for ax in axes:
-            ax.set_xlim(*span)
 
 
 def plot_states(
@@ -93,7 +88,7 @@ def plot_states(
     >>> fig, axes = plot_states(result, run=[0, 1], window=(0.0, 2.0))  # doctest: +SKIP
 
     """
-    result = _check(result)
+    result = check_result(result)
     chosen, span = runs(result.n_runs, run), window_(window)
     every = result.problem.quantities("x")
     chosen_k = entries("components", components, len(every))
@@ -106,28 +101,28 @@ def plot_states(
         tr = _trajectory(result, r, span)
         several = f" (run {r})" if len(chosen) > 1 else ""
         for p, (a, q, k) in enumerate(zip(axes, quantities, chosen_k, strict=True)):
-            if overlaid:
-                color = hat_color = f"C{p % 10}"
+            if overlaid:  # a colour per (run, state)
+                color = hat_color = f"C{(r_k * n_x + p) % 10}"
             else:
                 color = run_color(r_k, len(chosen), "C0")
                 hat_color = color if len(chosen) > 1 else "C1"
-            unit = f" [{q.unit}]" if overlaid and q.unit else ""
+            unit = q.unit if overlaid else ""  # one Axes for several states: each label has its unit
             hat = f"{q.name} estimate" if q.name else rf"$\hat x_{{{k + 1}}}$"
-            drawn["x"] += a.plot(tr.t, tr.x[:, k], color=color, lw=1.2, label=q.label + unit + several)
-            drawn["xhat"] += a.plot(
-                tr.t, tr.xhat[:, k], color=hat_color, lw=1.0, ls="--", label=hat + unit + several
-            )
+            label = with_unit(q.label, unit) + several
+            drawn["x"] += a.plot(tr.t, tr.x[:, k], color=color, lw=1.2, label=label)
+            label = with_unit(hat, unit) + several
+            drawn["xhat"] += a.plot(tr.t, tr.xhat[:, k], color=hat_color, lw=1.0, ls="--", label=label)
     for a, q in zip(axes, quantities, strict=True):
         if overlaid:
             units = {q.unit for q in quantities}
-            a.set_ylabel(f"x [{units.pop()}]" if len(units) == 1 and "" not in units else "x")
+            a.set_ylabel(with_unit("x", units.pop()) if len(units) == 1 else "x")
             # beside the panel: several states fill it, and a legend inside would hide some
             a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
         else:
-            a.set_ylabel(q.axis_label if q.name else (f"[{q.unit}]" if q.unit else ""))
+            a.set_ylabel(q.axis_label if q.name else with_unit("", q.unit).strip())
             a.legend(loc="upper right", fontsize="small", ncol=2)
         a.grid(alpha=0.3)
-    _time_axis(axes, span)
+    time_axes(axes, span)
     if own:
         fig.suptitle("State $x$ (solid) and state estimate $\\hat x$ (dashed)")
     return Drawn(fig, axes, drawn)
@@ -160,7 +155,7 @@ def plot_error(
     >>> fig, ax = plot_error(result, log=False)  # doctest: +SKIP
 
     """
-    result = _check(result)
+    result = check_result(result)
     chosen, span = runs(result.n_runs, run), window_(window)
     flag("log", log)
     fig, axes, own = canvas(ax, 1, 3.0)
@@ -176,7 +171,7 @@ def plot_error(
     a.grid(alpha=0.3, which="both")
     if len(chosen) > 1:
         a.legend(fontsize="small")
-    _time_axis(axes, span)
+    time_axes(axes, span)
     if own:
         fig.suptitle(r"Norm of the state estimation error $|\xi| = |x - \hat x|$")
     return Drawn(fig, a, {"error": lines})
@@ -213,7 +208,7 @@ def plot_inter_event_times(
     >>> fig, axes = plot_inter_event_times(result, logy=True)  # doctest: +SKIP
 
     """
-    result = _check(result)
+    result = check_result(result)
     chosen, span = runs(result.n_runs, run), window_(window)
     flag("logy", logy)
     N = result.n_nodes
@@ -234,8 +229,8 @@ def plot_inter_event_times(
             if len(chosen) == 1 and not overlaid:
                 drawn["gaps"].append(a.stem(times, gaps, basefmt=" "))
             else:
-                color = f"C{i % 10}" if overlaid else run_color(r_k, len(chosen), "C0")
-                marker = "os^Dv<>"[(i if overlaid else r_k) % 7]
+                color = f"C{(r_k * N + i) % 10}" if overlaid else run_color(r_k, len(chosen), "C0")
+                marker = "os^Dv<>"[(r_k * N + i if overlaid else r_k) % 7]
                 label = ", ".join(([name] if overlaid else []) + ([f"run {r}"] if len(chosen) > 1 else []))
                 drawn["gaps"] += a.plot(
                     times, gaps, ls="none", marker=marker, ms=4, mfc="none", color=color, label=label
@@ -255,7 +250,7 @@ def plot_inter_event_times(
         if logy:
             a.set_yscale("log")
         a.grid(alpha=0.3, which="both" if logy else "major")
-    _time_axis(axes, span)
+    time_axes(axes, span)
     if own:
         fig.suptitle("Inter-transmission times")
     return Drawn(fig, axes, drawn)

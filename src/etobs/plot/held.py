@@ -7,13 +7,14 @@ from typing import Any
 import numpy as np
 
 from etobs import _validate as v
-from etobs.errors import InputError, InputTypeError
+from etobs.errors import InputError
 from etobs.estimation.result import EstimationResult
 from etobs.estimation.tables import node_sent_values
+from etobs.model.quantities import with_unit
 from etobs.model.signals import Zero
 from etobs.plot.arc import solution_rows
-from etobs.plot.figures import _node_name
-from etobs.plot.layout import Drawn, canvas, in_window, run_color, runs, shared, time_label
+from etobs.plot.figures import _node_name, check_result
+from etobs.plot.layout import Drawn, canvas, in_window, runs, shared, time_axes
 from etobs.plot.layout import window as check_window
 
 
@@ -145,8 +146,7 @@ def plot_held_outputs(
     >>> fig, axes = plot_held_outputs(result, nodes=[0])  # doctest: +SKIP
 
     """
-    if not isinstance(result, EstimationResult):
-        raise InputTypeError(f"`result` must be an EstimationResult; got {type(result).__name__}")
+    result = check_result(result)
     chosen_runs = runs(result.n_runs, run)
     span = check_window(window)
     chosen = _nodes(result, nodes)
@@ -160,16 +160,13 @@ def plot_held_outputs(
         unit = _unit(result, node)
         if overlaid:  # the nodes' values in one Axes: the unit when they share it
             units = {_unit(result, n) for n in chosen}
-            a.set_ylabel(f"[{unit}]" if len(units) == 1 and unit else "")
+            a.set_ylabel(with_unit("", unit).strip() if len(units) == 1 else "")
         else:
-            a.set_ylabel(_node_name(result, node) + (f"\n[{unit}]" if unit else ""))
+            a.set_ylabel("\n".join(filter(None, [_node_name(result, node), with_unit("", unit).strip()])))
         # beside the panel: the steps fill it, and a legend inside would hide some
         a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
         a.grid(alpha=0.3)
-    time_label(axes[-1])
-    if span is not None:
-        for a in axes:
-            a.set_xlim(*span)
+    time_axes(axes, span)
     exact = source == "arc" or pb.network is None
     if source == "arc":
         note = "from the hybrid arc: exact steps; dots: values sent"
@@ -208,34 +205,40 @@ def _draw_run(
             f"this result kept neither arcs nor a grid of states{only}: simulate with "
             "save=SaveAt(steps=True) (exact steps) or save=SaveAt(grid=...)"
         )
-    keep = in_window(t, span)
+    keep = in_window(t, span, reach=True)  # a point beyond each end: the lines reach the edges
     t, j, q = t[keep], j[keep], q[keep]
+    if not t.size:  # nothing saved in or around the window: nothing to draw for this run
+        return "grid" if kept == "grid" else "arc"
     source = "grid" if kept == "grid" else "arc"
     measured = _measured(result, t, j, q)
     pb = result.problem
     # from the log alone, without a network: the observer holds what the node last sent
     exact = source == "arc" or pb.network is None
-    log = result.transmissions.select(run=run)
-    log = log[in_window(log.t, span)] if span is not None else log
+    whole = result.transmissions.select(run=run)
+    steps_log = whole[in_window(whole.t, (float(t[0]), float(t[-1])))]  # every change the rows span
+    log = whole[in_window(whole.t, span)] if span is not None else whole  # marked: those in the window
     several = f" (run {run})" if n_runs > 1 else ""
     overlaid = shared(axes)  # every node in one Axes: a colour per component, ticks stacked
+    # a colour per (run, component): the components of a panel (of all panels when overlaid)
+    per_run = sum(pb.layout.channels[n].size for n in chosen) if overlaid else 0
     offset = 0
     for position, (a, node) in enumerate(zip(axes, chosen, strict=True)):
         ch = pb.layout.channels[node]
         sent = log.select(rule=node)
         values = node_sent_values(result, sent, node)
+        changes = steps_log.select(rule=node)
+        first = offset if overlaid else 0
         for m, (held_label, measured_label) in enumerate(_labels(result, node)):
-            if overlaid:
-                color = f"C{(offset + m) % 10}"
-            else:
-                color = f"C{m % 10}" if n_runs == 1 else run_color(r_k, n_runs, "C0")
+            color = f"C{(r_k * (per_run or ch.size) + first + m) % 10}"
             drawn["measured"] += a.plot(
                 t, measured[node][:, m], color=color, lw=0.8, alpha=0.7, label=measured_label + several
             )
             if source == "arc":  # the arc has the held value on both sides of each jump
                 th, held, style = t, q[:, ch.held[m]], "default"
             elif exact:
-                th, held = _steps(t, q[:, ch.held[m]], sent.t, values[:, m])
+                th, held = _steps(
+                    t, q[:, ch.held[m]], changes.t, node_sent_values(result, changes, node)[:, m]
+                )
                 style = "steps-post"
             else:  # with a network it changes on delivery: known only at the grid's points
                 th, held, style = t, q[:, ch.held[m]], "steps-post"
@@ -246,14 +249,14 @@ def _draw_run(
             drawn["sent"] += a.plot(
                 sent.t, values[:, m], ls="none", marker="o", ms=3.5, color=color, label=label
             )
-        tick_color = "k" if n_runs == 1 else run_color(r_k, n_runs, "k")
-        if overlaid and n_runs == 1:
-            tick_color = f"C{offset % 10}"
+        alone = n_runs == 1 and not overlaid
+        tick_color = "k" if alone else f"C{(r_k * (per_run or ch.size) + first) % 10}"
         offset += ch.size
+        row = r_k * (len(chosen) if overlaid else 1) + (position if overlaid else 0)
         drawn["ticks"] += a.plot(
             sent.t,
-            # just above the bottom edge, clear of the axis ticks; one row per node when overlaid
-            np.full(len(sent), 0.03 + (0.06 * position if overlaid else 0.0)),
+            # just above the bottom edge, clear of the axis ticks; a row per node and run when several
+            np.full(len(sent), 0.03 + 0.06 * row),
             ls="none",
             marker="|",
             ms=9,

@@ -26,8 +26,8 @@ from etobs.errors import InputError, InputTypeError
 #: Text widths in inches of a two-column journal page (IEEE Transactions: 3.5 in a column,
 #: 7.16 in the page); ``paper_figure(columns=...)`` makes figures this wide.
 COLUMN_WIDTH = {1: 3.5, 2: 7.16}
-#: The formats :func:`save_figure` writes, by suffix: vector (pdf, svg, eps) or raster (png).
-FORMATS = ("pdf", "svg", "eps", "png")
+#: The formats :func:`save_figure` writes, by suffix: vector (pdf, svg) or raster (png).
+FORMATS = ("pdf", "svg", "png")
 
 
 class Drawn(tuple):  # type: ignore[type-arg]
@@ -41,7 +41,8 @@ class Drawn(tuple):  # type: ignore[type-arg]
         The axes drawn on, as the function documents.
     artists : mapping of str to list
         The artists drawn, by role (``"x"``, ``"xhat"``, ``"held"``, ...), in drawing
-        order; each function's docstring lists its roles.
+        order; each function's docstring lists its roles. Equality is the tuple's
+        (``fig`` and ``axes``).
 
     Examples
     --------
@@ -57,6 +58,10 @@ class Drawn(tuple):  # type: ignore[type-arg]
         self = super().__new__(cls, (fig, axes))
         self._artists = MappingProxyType({k: tuple(a) for k, a in artists.items()})
         return self
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled and copied with its artists (a figure pickles with them)."""
+        return (Drawn, (self[0], self[1], dict(self._artists)))
 
     @property
     def fig(self) -> Any:
@@ -156,12 +161,33 @@ def window(value: Any) -> tuple[float, float] | None:
     return lo, hi
 
 
-def in_window(t: np.ndarray, span: tuple[float, float] | None) -> np.ndarray:
-    """Boolean mask of the times ``t`` inside ``span`` (ends included); all of them without one."""
+def in_window(t: np.ndarray, span: tuple[float, float] | None, *, reach: bool = False) -> np.ndarray:
+    """Boolean mask of the times ``t`` inside ``span`` (ends included); all of them without one.
+
+    ``reach``: also the point just before and just after (``t`` in order) where no point
+    lies on the edge, so that a line drawn through the points reaches the window's edges
+    (the axis limits clip it there).
+    """
     t = np.asarray(t, dtype=float)
     if span is None:
         return np.ones(t.shape, dtype=bool)
-    return (t >= span[0]) & (t <= span[1])
+    inside = (t >= span[0]) & (t <= span[1])
+    if reach and t.size:
+        extra = []
+        if not np.any(t == span[0]):
+            extra.append(np.searchsorted(t, span[0], side="left") - 1)  # the last point before
+        if not np.any(t == span[1]):
+            extra.append(np.searchsorted(t, span[1], side="right"))  # the first point after
+        inside[[k for k in extra if 0 <= k < t.size]] = True
+    return inside
+
+
+def time_axes(axes: np.ndarray, span: tuple[float, float] | None, label: str = "t [s]") -> None:
+    """Label the time axis (once, on the bottom panel) and set it to ``span`` when given."""
+    time_label(axes[-1], label)
+    if span is not None:
+        for a in axes:
+            a.set_xlim(*span)
 
 
 def runs(n_runs: int, run: Any) -> tuple[int, ...]:
@@ -242,7 +268,6 @@ PAPER_RC = {
     "axes.linewidth": 0.6,
     "grid.linewidth": 0.5,
     "pdf.fonttype": 42,
-    "ps.fonttype": 42,
     "svg.fonttype": "none",
     "savefig.dpi": 300,
 }
@@ -272,7 +297,7 @@ def paper_style() -> Iterator[dict[str, Any]]:
 
 
 def save_figure(fig: Any, path: str | os.PathLike[str], *, dpi: float = 300.0) -> Path:
-    """Write ``fig`` as PDF, SVG, EPS (vector) or PNG, by the path's suffix.
+    """Write ``fig`` as PDF, SVG (vector) or PNG, by the path's suffix.
 
     Vector files keep text as text (fonts embedded, ``pdf.fonttype 42``) and carry no
     creation date, so the same figure writes the same bytes; ``dpi`` applies to PNG.
@@ -281,7 +306,7 @@ def save_figure(fig: Any, path: str | os.PathLike[str], *, dpi: float = 300.0) -
     ----------
     fig : matplotlib.figure.Figure
     path : str or path-like
-        Ends in ``.pdf``, ``.svg``, ``.eps`` or ``.png``.
+        Ends in ``.pdf``, ``.svg`` or ``.png``.
     dpi : float
         Resolution of a PNG.
 
@@ -304,8 +329,8 @@ def save_figure(fig: Any, path: str | os.PathLike[str], *, dpi: float = 300.0) -
             f"`path` must end in one of {', '.join('.' + f for f in FORMATS)}; got {str(path)!r}"
         )
     dpi = v.real("dpi", dpi, lower=1.0)
-    metadata = {"pdf": {"CreationDate": None}, "svg": {"Date": None}, "eps": {"CreationDate": None}}.get(fmt)
-    rc = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none", "svg.hashsalt": "etobs"}
+    metadata = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}.get(fmt)
+    rc = {"pdf.fonttype": 42, "svg.fonttype": "none", "svg.hashsalt": "etobs"}
     subset = logging.getLogger("fontTools")  # embedding a font logs every table at INFO
     level = subset.level
     subset.setLevel(max(level, logging.WARNING))

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from etobs.plot.layout import Drawn, canvas, in_window
+from etobs.plot.layout import Drawn, canvas, in_window, shared, time_axes
 from etobs.plot.layout import window as check_window
 
 
@@ -41,26 +41,25 @@ def plot_trace(
     n_x = trace["xhat"].shape[1]
     fig, axes, own = canvas(ax, n_x, 1.6 * n_x + 0.6)
     drawn: dict[str, list[Any]] = {"service": [], "reference": []}
-    keep = in_window(trace["t"], span)
+    keep = in_window(trace["t"], span, reach=True)
+    overlaid = shared(axes)  # every state in one Axes: a colour per state, the reference dashed in it
     for k, a in enumerate(axes):
+        color = f"C{k % 10}" if overlaid else "C1"
         drawn["service"] += a.plot(
-            trace["t"][keep], trace["xhat"][keep, k], color="C1", lw=1.2, label=rf"$\hat x_{k + 1}$ (service)"
+            trace["t"][keep],
+            trace["xhat"][keep, k],
+            color=color,
+            lw=1.2,
+            label=rf"$\hat x_{k + 1}$ (service)",
         )
         if reference is not None:
-            ref = in_window(reference.t, span)
-            drawn["reference"] += a.plot(
-                reference.t[ref],
-                reference.xhat[ref, k],
-                color="k",
-                lw=0.8,
-                ls="--",
-                label="offline reference",
-            )
+            ref = in_window(reference.t, span, reach=True)
+            label = "offline reference" + (rf" $\hat x_{k + 1}$" if overlaid else "")
+            dashed = {"color": color if overlaid else "k", "lw": 0.8, "ls": "--", "label": label}
+            drawn["reference"] += a.plot(reference.t[ref], reference.xhat[ref, k], **dashed)
         a.legend(loc="upper right", fontsize="small", ncol=2)
         a.grid(alpha=0.3)
-        if span is not None:
-            a.set_xlim(*span)
-    axes[-1].set_xlabel("t [s] (service time)")
+    time_axes(axes, span, "t [s] (service time)")
     if own:
         fig.suptitle("Estimate of the observer service")
     return Drawn(fig, axes, drawn)
