@@ -18,8 +18,8 @@ demo: $(VENV)/.installed-plot
 
 ## lint: ruff (lint and format) and mypy (strict where pyproject.toml says)
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py
-	$(BIN)/ruff format --check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py
+	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py conftest.py
+	$(BIN)/ruff format --check src tests benchmarks examples docs/conf.py docs/gallery_scraper.py conftest.py
 	$(BIN)/mypy
 
 ## test: lint, the whole test suite (slow tests included, one process per core, each test

@@ -85,7 +85,9 @@ def plot_states(
 
     Examples
     --------
-    >>> fig, axes = plot_states(result, run=[0, 1], window=(0.0, 2.0))  # doctest: +SKIP
+    >>> fig, axes = plot_states(result, run=[0, 1], window=(0.0, 2.0))
+    >>> [ax.get_ylabel() for ax in axes], [float(t) for t in axes[0].get_xlim()]
+    (['position [m]', 'velocity [m/s]'], [0.0, 2.0])
 
     """
     result = check_result(result)
@@ -152,7 +154,9 @@ def plot_error(
 
     Examples
     --------
-    >>> fig, ax = plot_error(result, log=False)  # doctest: +SKIP
+    >>> drawn = plot_error(result, run=[0, 1], log=False)
+    >>> [line.get_label() for line in drawn.artists["error"]]
+    ['run 0', 'run 1']
 
     """
     result = check_result(result)
@@ -205,7 +209,9 @@ def plot_inter_event_times(
 
     Examples
     --------
-    >>> fig, axes = plot_inter_event_times(result, logy=True)  # doctest: +SKIP
+    >>> fig, axes = plot_inter_event_times(result, logy=True)
+    >>> [ax.get_yscale() for ax in axes]
+    ['log', 'log']
 
     """
     result = check_result(result)

@@ -143,7 +143,9 @@ def plot_held_outputs(
 
     Examples
     --------
-    >>> fig, axes = plot_held_outputs(result, nodes=[0])  # doctest: +SKIP
+    >>> drawn = plot_held_outputs(result, nodes=[0])
+    >>> len(drawn.artists["held"]), drawn.axes[0].get_ylabel()
+    (1, 'sensor 1')
 
     """
     result = check_result(result)

@@ -317,9 +317,9 @@ def save_figure(fig: Any, path: str | os.PathLike[str], *, dpi: float = 300.0) -
 
     Examples
     --------
-    >>> fig, ax = paper_figure()
-    >>> save_figure(fig, tmp_path / "empty.svg").suffix  # doctest: +SKIP
-    '.svg'
+    >>> fig, (ax,) = paper_figure()
+    >>> save_figure(fig, tmp_path / "empty.pdf").read_bytes()[:5]
+    b'%PDF-'
 
     """
     target = Path(path)

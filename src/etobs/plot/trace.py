@@ -34,7 +34,13 @@ def plot_trace(
 
     Examples
     --------
-    >>> fig, axes = plot_trace(read_trace("trace.npz"))  # doctest: +SKIP
+    A trace as :func:`~etobs.runtime.server.read_trace` returns it (here made up):
+
+    >>> import numpy as np
+    >>> trace = {"t": np.linspace(0.0, 1.0, 11), "xhat": np.zeros((11, 2))}
+    >>> fig, axes = plot_trace(trace, window=(0.0, 0.5))
+    >>> len(axes), [float(t) for t in axes[0].get_xlim()]
+    (2, [0.0, 0.5])
 
     """
     span = check_window(window)
