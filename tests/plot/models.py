@@ -42,3 +42,20 @@ def two_sensors(**kwargs) -> EstimationProblem:
     return EstimationProblem(
         plant, observer, nodes=nodes, v=Sinusoid(amplitude=[0.0, 0.1], omega=1.0), **kwargs
     )
+
+
+#: Names and units of the oscillator's states and outputs (h is the identity: y = x).
+NAMES = {
+    "state_names": ["position", "velocity"],
+    "state_units": ["m", "m/s"],
+    "output_names": ["position", "velocity"],
+    "output_units": ["m", "m/s"],
+}
+
+
+def named_sensors() -> EstimationProblem:
+    """``two_sensors()`` with its states and outputs named, with units (``NAMES``)."""
+    pb = two_sensors()
+    return EstimationProblem(
+        Plant(f_p=_plant, h=_h, n_x=2, n_y=2, n_v=2, **NAMES), pb.observer, nodes=pb.nodes, v=pb.v
+    )

@@ -16,23 +16,14 @@ from etobs.plot import (
     plot_states,
     save_figure,
 )
-from tests.plot.models import T_END, X0, _h, _plant, two_sensors
-
-NAMES = {
-    "state_names": ["position", "velocity"],
-    "state_units": ["m", "m/s"],
-    "output_names": ["position", "velocity"],
-    "output_units": ["m", "m/s"],
-}
+from tests.plot.models import T_END, X0, _h, _plant, named_sensors
 
 
 @pytest.fixture(scope="module")
 def named():
     """The oscillator of the other plot tests, its states and outputs named, with units; two runs."""
-    pb = two_sensors()
-    plant = Plant(f_p=_plant, h=_h, n_x=2, n_y=2, n_v=2, **NAMES)
-    pb = type(pb)(plant, pb.observer, nodes=pb.nodes, v=pb.v)
-    return simulate(pb, x0=X0, t_end=T_END, save=SaveAt(grid=np.linspace(0, T_END, 251)), backend="scipy")
+    save = SaveAt(grid=np.linspace(0, T_END, 251))
+    return simulate(named_sensors(), x0=X0, t_end=T_END, save=save, backend="scipy")
 
 
 def _lines(ax):

@@ -144,8 +144,8 @@ def plot_held_outputs(
     Examples
     --------
     >>> drawn = plot_held_outputs(result, nodes=[0])
-    >>> len(drawn.artists["held"]), drawn.axes[0].get_ylabel()
-    (1, 'sensor 1')
+    >>> drawn.artists["held"][0].get_label(), drawn.axes[0].get_ylabel().splitlines()
+    ('position, held', ['sensor 1', '[m]'])
 
     """
     result = check_result(result)
