@@ -161,6 +161,12 @@ def test_paper_style_sets_a_journals_fonts_while_drawing(named):
         (lambda r, f: plot_error(r, run=[0, 0]), InputError, r"`run` must not repeat an index; got \[0, 0\]"),
         (lambda r, f: plot_error(r, run=[]), InputError, r"`run` must name at least one run index"),
         (lambda r, f: paper_figure(columns=3), InputError, r"`columns` must be 1 or 2 \(one column or the page\)"),
+        (lambda r, f: paper_figure(nrows=0), InputError, r"`nrows` must be an integer >= 1; got 0"),
+        (lambda r, f: paper_figure(height=0.4), InputError, r"`height` must be >= 0\.5; got 0\.4"),
+        (lambda r, f: save_figure(f, "figure.png", dpi=0), InputError, r"`dpi` must be >= 1; got 0"),
+        (lambda r, f: r.problem.quantities("w"), InputError, r"`variable` must be one of x, xhat, z, y, ybar, e, "
+         r"u; got 'w'"),
+        (lambda r, f: r.problem.plant.quantities("z"), InputError, r"`vector` must be 'x', 'y' or 'u'; got 'z'"),
         (lambda r, f: save_figure(f, "figure.eps"), InputError, r"`path` must end in one of \.pdf, \.svg, \.png; "
          r"got 'figure\.eps'"),
     ],
